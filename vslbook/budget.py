@@ -76,7 +76,5 @@ def get_budget(name: str | Budget | None = None) -> Budget:
     key = str(name).strip().lower()
     if key not in BUDGETS:
         source = f" (from ${ENV_VAR})" if name == os.environ.get(ENV_VAR) else ""
-        raise ValueError(
-            f"unknown budget {name!r}{source}; expected one of {', '.join(BUDGETS)}"
-        )
+        raise ValueError(f"unknown budget {name!r}{source}; expected one of {', '.join(BUDGETS)}")
     return BUDGETS[key]

@@ -9,7 +9,9 @@ import numpy as np
 import torch
 
 
-def seed_everything(seed: int, env: Any | None = None, *, deterministic_torch: bool = True) -> np.random.Generator:
+def seed_everything(
+    seed: int, env: Any | None = None, *, deterministic_torch: bool = True
+) -> np.random.Generator:
     """Seed python, numpy, torch and (optionally) a gymnasium environment and its spaces.
 
     Args:
@@ -27,7 +29,7 @@ def seed_everything(seed: int, env: Any | None = None, *, deterministic_torch: b
         raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
     seed = int(seed)
     random.seed(seed)
-    np.random.seed(seed % 2**32)
+    np.random.seed(seed % 2**32)  # noqa: NPY002 - legacy global state, still used by libraries
     torch.manual_seed(seed)
     if deterministic_torch:
         torch.use_deterministic_algorithms(True, warn_only=True)

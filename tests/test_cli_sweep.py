@@ -1,0 +1,106 @@
+import shutil
+import subprocess
+import sys
+
+import pytest
+import yaml
+
+from vslbook.cli import main
+from vslbook.sweep import expand_grid, load_slurm_config, sweep
+
+ENV = "vslbook/PointReach-v0"
+
+
+def test_console_script_lists_budgets():
+    exe = shutil.which("vslbook") or str(
+        __import__("pathlib").Path(sys.executable).with_name("vslbook")
+    )
+    out = subprocess.run([exe, "budgets"], capture_output=True, text=True, check=True).stdout
+    assert "smoke" in out and "reduced" in out and "full" in out
+
+
+def test_cli_run_and_resume(tmp_path, capsys):
+    argv = [
+        "run",
+        "erl-pg",
+        "--env",
+        ENV,
+        "--seed",
+        "0",
+        "--budget",
+        "smoke",
+        "--root",
+        str(tmp_path),
+        "--no-progress",
+        "--set",
+        "learning_rate=0.1",
+    ]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "eval_return" in out
+    assert main(argv) == 0  # second call finds the DONE run
+
+
+def test_cli_bad_input_exits_2_with_message(tmp_path, capsys):
+    assert main(["run", "nope", "--env", ENV, "--root", str(tmp_path)]) == 2
+    assert "unknown algorithm 'nope'" in capsys.readouterr().err
+    assert main(["run", "erl-pg", "--env", ENV, "--budget", "huge", "--root", str(tmp_path)]) == 2
+    assert "unknown budget 'huge'" in capsys.readouterr().err
+    assert main(["figure", "no-such-figure"]) == 2
+    assert "unknown figure" in capsys.readouterr().err
+    assert (
+        main(["run", "erl-pg", "--env", ENV, "--set", "learning_rate=abc", "--root", str(tmp_path)])
+        == 2
+    )
+    assert "cannot convert learning_rate='abc' to float" in capsys.readouterr().err
+
+
+def test_cli_lists_registries(capsys):
+    assert main(["algorithms"]) == 0
+    assert "erl-pg" in capsys.readouterr().out
+    assert main(["figures"]) == 0
+    assert capsys.readouterr().out.strip()
+
+
+def test_expand_grid():
+    assert expand_grid(None) == [{}]
+    assert expand_grid({"a": [1, 2], "b": ["x"]}) == [{"a": 1, "b": "x"}, {"a": 2, "b": "x"}]
+    with pytest.raises(ValueError, match=r"grid\['a'\] must be a list"):
+        expand_grid({"a": 3})
+
+
+def test_slurm_config_from_yaml(tmp_path):
+    cfg = {"slurm_partition": "gpu", "timeout_min": 60, "gpus_per_node": 1}
+    path = tmp_path / "slurm.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    assert load_slurm_config(path) == cfg
+    assert load_slurm_config(cfg) == cfg
+    with pytest.raises(ValueError, match="does not exist"):
+        load_slurm_config(tmp_path / "missing.yaml")
+
+
+def test_sweep_debug_executor_runs_grid(tmp_path):
+    paths = sweep(
+        "erl-pg",
+        [ENV],
+        seeds=[0, 1],
+        grid={"learning_rate": [0.05, 0.1]},
+        budget="smoke",
+        root=tmp_path,
+        executor="debug",
+    )
+    assert len(paths) == 4 and len(set(paths)) == 4
+    assert all((p / "DONE").exists() for p in paths)
+
+
+@pytest.mark.slow
+def test_sweep_local_executor_subprocesses(tmp_path):
+    paths = sweep("erl-pg", [ENV], seeds=[0], budget="smoke", root=tmp_path, executor="local")
+    assert len(paths) == 1 and (paths[0] / "DONE").exists()
+
+
+def test_sweep_rejects_bad_input(tmp_path):
+    with pytest.raises(ValueError, match="unknown executor 'k8s'"):
+        sweep("erl-pg", [ENV], [0], executor="k8s", root=tmp_path)
+    with pytest.raises(ValueError, match="has no field 'nope'"):
+        sweep("erl-pg", [ENV], [0], grid={"nope": [1]}, root=tmp_path, executor="debug")

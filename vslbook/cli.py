@@ -1,0 +1,139 @@
+"""The ``vslbook`` command line.
+
+    vslbook budgets                         the presets and what they scale
+    vslbook algorithms                      registered algorithms and their envs
+    vslbook figures                         registered figures
+    vslbook run ALGO --env ENV --seed S --budget B [--set key=value ...] [--root runs]
+    vslbook sweep ALGO --env ENV [--env ENV2] --seeds 0 1 2 [--grid key=v1,v2] \
+                  [--executor debug|local|slurm] [--slurm slurm.yaml]
+    vslbook figure ID [--budget B] [--out DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+
+from vslbook.budget import BUDGETS, get_budget
+from vslbook.registry import ALGORITHMS, FIGURES, get_figure, load_plugins
+
+
+def _pairs(items: Sequence[str] | None, *, lists: bool) -> dict:
+    out: dict = {}
+    for item in items or []:
+        if "=" not in item:
+            raise ValueError(f"expected key=value, got {item!r}")
+        key, value = item.split("=", 1)
+        out[key] = value.split(",") if lists else value
+    return out
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="vslbook", description=__doc__.split("\n\n")[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    sub.add_parser("budgets", help="list the budget presets")
+    sub.add_parser("algorithms", help="list registered algorithms")
+    sub.add_parser("figures", help="list registered figures")
+
+    r = sub.add_parser("run", help="train one algorithm on one env with one seed")
+    r.add_argument("algo")
+    r.add_argument("--env", required=True)
+    r.add_argument("--seed", type=int, default=0)
+    r.add_argument(
+        "--budget",
+        default=None,
+        help="smoke | reduced | full (default: $VSLBOOK_BUDGET or reduced)",
+    )
+    r.add_argument("--root", default="runs", help="folder for run directories")
+    r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="override config fields")
+    r.add_argument("--no-progress", action="store_true")
+
+    s = sub.add_parser("sweep", help="train a grid of configs and seeds via submitit")
+    s.add_argument("algo")
+    s.add_argument("--env", action="append", required=True)
+    s.add_argument("--seeds", type=int, nargs="*", default=None)
+    s.add_argument("--budget", default=None)
+    s.add_argument("--root", default="runs")
+    s.add_argument("--grid", nargs="*", metavar="KEY=V1,V2", help="grid over config fields")
+    s.add_argument("--executor", default="local", choices=["debug", "local", "slurm"])
+    s.add_argument("--slurm", default=None, help="YAML file of submitit SLURM parameters")
+
+    f = sub.add_parser("figure", help="reproduce a registered figure")
+    f.add_argument("id")
+    f.add_argument("--budget", default=None)
+    f.add_argument(
+        "--out", default=None, help="output folder (default: $VSLBOOK_FIGURES or build/figures)"
+    )
+    return p
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    args = _parser().parse_args(argv)
+    try:
+        return _dispatch(args)
+    except ValueError as err:
+        print(f"vslbook: error: {err}", file=sys.stderr)
+        return 2
+
+
+def _dispatch(args: argparse.Namespace) -> int:
+    if args.command == "budgets":
+        for b in BUDGETS.values():
+            print(
+                f"{b.name:8s} fraction={b.fraction:<6g} seeds={b.seeds:<3d} "
+                f"eval_episodes={b.eval_episodes:<3d} bootstrap_reps={b.bootstrap_reps}"
+            )
+        return 0
+    if args.command in ("algorithms", "figures"):
+        load_plugins()
+        table = ALGORITHMS if args.command == "algorithms" else FIGURES
+        for name, item in sorted(table.items()):
+            extra = f"  [{', '.join(item.envs)}]" if getattr(item, "envs", ()) else ""
+            print(f"{name:24s} {item.doc}{extra}")
+        return 0
+    if args.command == "run":
+        from vslbook.training import run
+
+        rd = run(
+            args.algo,
+            args.env,
+            args.seed,
+            args.budget,
+            root=args.root,
+            overrides=_pairs(args.set, lists=False),
+            progress=not args.no_progress,
+        )
+        print(rd.path)
+        if rd.done:
+            print(json.dumps(json.loads((rd.path / "DONE").read_text() or "{}"), indent=1))
+        return 0
+    if args.command == "sweep":
+        from vslbook.sweep import sweep
+
+        paths = sweep(
+            args.algo,
+            args.env,
+            args.seeds,
+            grid=_pairs(args.grid, lists=True),
+            budget=args.budget,
+            root=args.root,
+            executor=args.executor,
+            slurm=args.slurm,
+        )
+        for p in paths:
+            print(p)
+        return 0
+    if args.command == "figure":
+        fig = get_figure(args.id)
+        out = Path(args.out) if args.out else None
+        for path in fig.make(budget=get_budget(args.budget), out_dir=out):
+            print(path)
+        return 0
+    raise AssertionError(args.command)  # argparse guarantees a known command
+
+
+if __name__ == "__main__":  # pragma: no cover
+    raise SystemExit(main())

@@ -1,0 +1,30 @@
+"""Environments, registered with gymnasium under the ``vslbook/`` namespace.
+
+Episodic (black-box) tasks of Chapters 2–4 use a one-step gymnasium interface: the
+observation is the context c, the action is the whole parameter vector θ of a movement
+primitive, and ``step(θ)`` runs the episode and returns the return R(θ, c) (Eq. 2.27).
+They also expose ``evaluate(theta, context)`` for batched evaluation and
+``sample_contexts(n, rng)`` for the environment's context distribution p(c).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import gymnasium as gym
+
+EPISODIC_ENVS = {
+    "vslbook/PointReach-v0": "vslbook.envs.point_reach:PointReachEnv",
+}
+
+for _id, _entry in EPISODIC_ENVS.items():
+    if _id not in gym.registry:
+        gym.register(id=_id, entry_point=_entry)
+
+
+def make(env_id: str, **kwargs: Any) -> gym.Env:
+    """Create a registered environment; an unknown id is a clear error listing the known ones."""
+    if env_id not in gym.registry:
+        known = sorted(k for k in gym.registry if k.startswith("vslbook/"))
+        raise ValueError(f"unknown environment {env_id!r}; vslbook provides {', '.join(known)}")
+    return gym.make(env_id, **kwargs)

@@ -1,0 +1,168 @@
+"""Basis functions and phase variables shared by the movement primitives (thesis Sec. 2.6.1).
+
+Two ingredients are used throughout:
+
+* normalised radial basis functions (RBFs) ``psi_i(s)`` over a phase ``s`` in ``[0, 1]``:
+  Gaussian bumps ``b_i(s) = exp(-(s - c_i)^2 / (2 h^2))`` with centres ``c_i`` spaced evenly
+  over ``[0, 1]`` and width ``h``, divided by their sum so that ``sum_i psi_i(s) = 1``.
+  ProMPs (Eq. 2.46) use them directly with ``s = t / duration``.
+* the DMP canonical system ``x(t) = exp(-alpha_x t / tau)`` (Eq. 2.45) and the DMP forcing
+  basis ``x phi(x)``.
+
+The module also holds the small input checks used by ``promp``, ``dmp`` and ``prodmp``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+import torch
+
+Array = torch.Tensor | np.ndarray | float | list
+
+
+# --------------------------------------------------------------------------- input checks
+def _check_int(name: str, value: Any, minimum: int = 1) -> int:
+    """Return ``value`` as an int, or raise ValueError unless it is an integer >= ``minimum``."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
+        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
+    return int(value)
+
+
+def _check_positive(name: str, value: Any) -> float:
+    """Return ``value`` as a float, or raise ValueError unless it is a finite number > 0."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise ValueError(f"{name} must be a finite positive number, got {value!r}")
+    if not math.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a finite positive number, got {value!r}")
+    return float(value)
+
+
+def _as_tensor(name: str, value: Array, dtype: torch.dtype | None = None) -> torch.Tensor:
+    """Convert a numpy array, list, number or tensor to a floating tensor.
+
+    ``dtype=None`` keeps the dtype of a floating tensor and uses float64 otherwise.
+    """
+    if dtype is None:
+        floating = torch.is_tensor(value) and value.is_floating_point()
+        dtype = value.dtype if floating else torch.float64
+    try:
+        return torch.as_tensor(value, dtype=dtype)
+    except (TypeError, ValueError, RuntimeError) as err:
+        raise ValueError(f"{name} must be array-like of numbers, got {value!r}") from err
+
+
+def _check_last_dim(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
+    """Raise ValueError unless ``value`` has shape ``(..., size)``."""
+    if value.dim() < 1 or value.shape[-1] != size:
+        raise ValueError(
+            f"{name} must have shape (..., {size}) ({what}), got shape {tuple(value.shape)}"
+        )
+    return value
+
+
+def _check_square(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
+    """Raise ValueError unless ``value`` has shape ``(..., size, size)``."""
+    if value.dim() < 2 or value.shape[-2:] != (size, size):
+        raise ValueError(
+            f"{name} must have shape (..., {size}, {size}) ({what}), got shape {tuple(value.shape)}"
+        )
+    return value
+
+
+def _check_gaussian(
+    mean: torch.Tensor, cov: torch.Tensor, size: int, what: str, names: tuple[str, str]
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """Check a Gaussian ``N(mean, cov)`` over ``size`` parameters and broadcast its batch."""
+    _check_last_dim(names[0], mean, size, what)
+    _check_square(names[1], cov, size, what)
+    batch = torch.broadcast_shapes(mean.shape[:-1], cov.shape[:-2])
+    return mean.expand(*batch, size), cov.expand(*batch, size, size)
+
+
+# --------------------------------------------------------------------------- time and phase
+def time_grid(duration: float, dt: float, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Time steps ``0, dt, 2 dt, ..., n dt`` with ``n = round(duration / dt)``, shape ``(n + 1,)``.
+
+    The step is exactly ``dt``; the last time is the multiple of ``dt`` closest to ``duration``.
+    """
+    duration = _check_positive("duration", duration)
+    dt = _check_positive("dt", dt)
+    if dt > duration:
+        raise ValueError(f"dt must not exceed duration={duration}, got dt={dt}")
+    n_steps = round(duration / dt)
+    return torch.arange(n_steps + 1, dtype=dtype) * dt
+
+
+def canonical_phase(t: Array, alpha_x: float = 3.0, tau: float = 1.0) -> torch.Tensor:
+    """DMP canonical system ``x(t) = exp(-alpha_x t / tau)`` (thesis Eq. 2.45), same shape as t.
+
+    The phase starts at ``x(0) = 1`` and decays to zero; ``tau`` is the temporal scaling
+    (written gamma in the thesis).
+    """
+    alpha_x = _check_positive("alpha_x", alpha_x)
+    tau = _check_positive("tau", tau)
+    t = _as_tensor("t", t)
+    return torch.exp(-alpha_x * t / tau)
+
+
+# --------------------------------------------------------------------------- radial basis
+def rbf_centers(n_basis: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
+    """Centres of ``n_basis`` bumps spaced evenly over the phase interval ``[0, 1]``."""
+    n_basis = _check_int("n_basis", n_basis)
+    return torch.linspace(0.0, 1.0, n_basis, dtype=dtype)
+
+
+def default_width(n_basis: int) -> float:
+    """Default bump width: the distance between neighbouring centres (1 for a single bump)."""
+    n_basis = _check_int("n_basis", n_basis)
+    return 1.0 / (n_basis - 1) if n_basis > 1 else 1.0
+
+
+def normalized_rbf(
+    phase: Array, n_basis: int, width: float | None = None, *, derivative: bool = False
+) -> torch.Tensor:
+    """Normalised Gaussian RBFs ``psi_i(s) = b_i(s) / sum_j b_j(s)``, shape ``(*phase.shape, n)``.
+
+    Args:
+        phase: phase values ``s`` (usually in ``[0, 1]``; values outside are allowed).
+        n_basis: number of bumps, centred evenly over ``[0, 1]``.
+        width: standard deviation ``h`` of each bump in phase units; ``None`` uses
+            :func:`default_width`.
+        derivative: return ``d psi_i / d s`` instead of ``psi_i``.
+
+    The normalisation is a softmax over the log-bumps, so it stays finite far from all centres.
+    With ``u_i = -(s - c_i) / h^2`` the derivative is ``psi_i (u_i - sum_j psi_j u_j)``.
+    """
+    n_basis = _check_int("n_basis", n_basis)
+    width = default_width(n_basis) if width is None else _check_positive("width", width)
+    phase = _as_tensor("phase", phase)
+    centers = rbf_centers(n_basis, dtype=phase.dtype)
+    diff = phase.unsqueeze(-1) - centers
+    psi = torch.softmax(-0.5 * (diff / width) ** 2, dim=-1)
+    if not derivative:
+        return psi
+    u = -diff / width**2
+    return psi * (u - (psi * u).sum(dim=-1, keepdim=True))
+
+
+def dmp_forcing_basis(
+    t: Array,
+    n_basis: int,
+    alpha_x: float = 3.0,
+    tau: float = 1.0,
+    width: float | None = None,
+) -> torch.Tensor:
+    """The DMP forcing basis ``x(t) phi(x(t))`` of Eq. 2.45, shape ``(*t.shape, n_basis)``.
+
+    ``phi(x)`` is the normalised RBF evaluated at ``s = -ln(x) / alpha_x = t / tau``. This is a
+    function of the phase ``x`` alone, and it spreads the bumps evenly in time over
+    ``[0, tau]`` (the usual choice of centres ``exp(-alpha_x c_i)`` in phase space). The forcing
+    term of one degree of freedom is then ``f(x) = x phi(x)^T theta``. ``s`` is computed as
+    ``t / tau`` so that it stays finite after ``x`` underflows.
+    """
+    t = _as_tensor("t", t)
+    x = canonical_phase(t, alpha_x, tau)
+    return x.unsqueeze(-1) * normalized_rbf(t / tau, n_basis, width)

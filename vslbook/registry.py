@@ -1,0 +1,137 @@
+"""Registries of algorithms and figures, filled by the modules that implement them.
+
+`vslbook run ALGO` and `vslbook figure ID` look names up here. A chapter module
+registers itself at import time::
+
+    register_algorithm("erl-pg", train=train, config=ERLPGConfig, envs=(...), doc="...")
+
+The CLI imports :data:`PLUGIN_MODULES` first so every registration has happened.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+#: Modules that register algorithms or figures when imported.
+PLUGIN_MODULES: tuple[str, ...] = (
+    "vslbook.erl.pg",
+    "vslbook.figures",
+)
+
+
+@dataclass(frozen=True)
+class Algorithm:
+    """A trainable algorithm.
+
+    Attributes:
+        name: registry key (``vslbook run NAME``).
+        train: ``train(run, config, budget, *, progress, stop_after) -> dict`` that trains
+            inside a :class:`vslbook.results.RunDir`, resuming from its checkpoint.
+        config: frozen dataclass of hyper-parameters with the thesis's defaults.
+        envs: environment ids the algorithm is meant for (empty: any).
+        doc: one line for ``vslbook algorithms``.
+    """
+
+    name: str
+    train: Callable[..., dict]
+    config: type
+    envs: tuple[str, ...] = ()
+    doc: str = ""
+
+    def check_env(self, env: str) -> None:
+        """Raise a clear error if ``env`` is not one this algorithm is meant for."""
+        if self.envs and env not in self.envs:
+            raise ValueError(
+                f"algorithm {self.name!r} does not support env {env!r}; "
+                f"expected one of {', '.join(self.envs)}"
+            )
+
+
+@dataclass(frozen=True)
+class Figure:
+    """A reproducible figure: ``make(budget, out_dir) -> list[Path]``."""
+
+    id: str
+    make: Callable[..., list]
+    doc: str = ""
+
+
+ALGORITHMS: dict[str, Algorithm] = {}
+FIGURES: dict[str, Figure] = {}
+
+
+def register_algorithm(
+    name: str,
+    *,
+    train: Callable[..., dict],
+    config: type,
+    envs: tuple[str, ...] = (),
+    doc: str = "",
+) -> Algorithm:
+    algo = Algorithm(name=name, train=train, config=config, envs=tuple(envs), doc=doc)
+    ALGORITHMS[name] = algo
+    return algo
+
+
+def register_figure(fig_id: str, make: Callable[..., list], doc: str = "") -> Figure:
+    fig = Figure(id=fig_id, make=make, doc=doc)
+    FIGURES[fig_id] = fig
+    return fig
+
+
+def load_plugins() -> None:
+    """Import every module that registers something (idempotent)."""
+    for mod in PLUGIN_MODULES:
+        importlib.import_module(mod)
+
+
+def get_algorithm(name: str) -> Algorithm:
+    load_plugins()
+    if name not in ALGORITHMS:
+        raise ValueError(
+            f"unknown algorithm {name!r}; expected one of {', '.join(sorted(ALGORITHMS))}"
+        )
+    return ALGORITHMS[name]
+
+
+def get_figure(fig_id: str) -> Figure:
+    load_plugins()
+    if fig_id not in FIGURES:
+        raise ValueError(f"unknown figure {fig_id!r}; expected one of {', '.join(sorted(FIGURES))}")
+    return FIGURES[fig_id]
+
+
+def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) -> Any:
+    """Build ``config_cls`` with ``overrides``, converting strings to the field's type.
+
+    Raises:
+        ValueError: for a field the config does not have (the message lists the valid ones)
+            or a value that cannot be converted.
+    """
+    import dataclasses
+
+    fields = {f.name: f for f in dataclasses.fields(config_cls)}
+    kwargs: dict[str, Any] = {}
+    for key, value in (overrides or {}).items():
+        if key not in fields:
+            raise ValueError(
+                f"{config_cls.__name__} has no field {key!r}; expected one of {', '.join(fields)}"
+            )
+        default = getattr(config_cls(), key)
+        if isinstance(value, str) and not isinstance(default, str):
+            try:
+                if isinstance(default, bool):
+                    if value.lower() not in ("true", "false", "1", "0"):
+                        raise ValueError(value)
+                    value = value.lower() in ("true", "1")
+                else:
+                    value = type(default)(value)
+            except (TypeError, ValueError) as err:
+                raise ValueError(
+                    f"cannot convert {key}={value!r} to {type(default).__name__}"
+                ) from err
+        kwargs[key] = value
+    return config_cls(**kwargs)
