@@ -1,13 +1,17 @@
 # vslbook: two commands.
 #   make book   set up .venv and execute every notebook at $(VSLBOOK_BUDGET) (default: reduced)
 #   make test   set up .venv and run the tests, notebooks included, at the smoke budget
-# Setup is idempotent: the stamp .venv/.installed is rebuilt only when pyproject.toml changes.
+# Setup is idempotent: the stamp .venv/.installed is rebuilt only when pyproject.toml or
+# this Makefile changes.
 
 PYTHON ?= python3.11
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 TORCH  := torch==2.13.0
+# MyoSuite declares gymnasium<1.3 and ~70 optional packages; its hand tasks run on the
+# pinned stack when installed without dependencies (see vslbook/envs/step_based.py).
+MYO    := myosuite==3.0.0 myo-sim==0.2.3 termcolor colorednoise
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
 VSLBOOK_BUDGET ?= reduced
@@ -15,7 +19,7 @@ export MPLBACKEND ?= Agg
 export MUJOCO_GL ?= disable
 export PYTHONHASHSEED := 0
 
-.PHONY: setup book test test-fast notebooks lab lint clean help
+.PHONY: setup myo book test test-fast notebooks lab lint clean help
 .DEFAULT_GOAL := help
 
 help:
@@ -28,15 +32,20 @@ $(BIN)/python:
 	@command -v $(PYTHON) >/dev/null 2>&1 || { echo "need $(PYTHON) (set PYTHON=...)"; exit 1; }
 	$(PYTHON) -m venv $(VENV)
 
-$(STAMP): pyproject.toml | $(BIN)/python
+$(STAMP): pyproject.toml Makefile | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	# CPU torch first: anything asking for torch later finds it satisfied (no CUDA build).
 	$(BIN)/python -m pip install --quiet $(TORCH)
 	$(BIN)/python -m pip install --quiet -e ".[notebooks,dev]"
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 >/dev/null
+	$(BIN)/python -m pip install --quiet --no-deps $(MYO)
 	touch $(STAMP)
 
 setup: $(STAMP)
+
+# MyoSuite's hand tasks alone (already part of setup); --no-deps keeps the pinned stack.
+myo: | $(BIN)/python
+	$(BIN)/python -m pip install --quiet --no-deps $(MYO)
 
 notebooks/%.ipynb: notebooks/%.py $(STAMP)
 	$(BIN)/jupytext --quiet --to ipynb --output $@ $<

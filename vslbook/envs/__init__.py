@@ -13,18 +13,24 @@ from typing import Any
 
 import gymnasium as gym
 
-EPISODIC_ENVS = {
+from vslbook.envs.step_based import STEP_TASKS, make_step_env
+
+VSLBOOK_ENVS = {
     "vslbook/PointReach-v0": "vslbook.envs.point_reach:PointReachEnv",
+    # Step-based (Chapter 5); make() builds it through make_step_env like the other STEP_TASKS.
+    "vslbook/PointMassFourGoals-v0": "vslbook.envs.point_mass:PointMassFourGoalsEnv",
 }
 
-for _id, _entry in EPISODIC_ENVS.items():
+for _id, _entry in VSLBOOK_ENVS.items():
     if _id not in gym.registry:
         gym.register(id=_id, entry_point=_entry)
 
 
 def make(env_id: str, **kwargs: Any) -> gym.Env:
     """Create a registered environment; an unknown id is a clear error listing the known ones."""
+    if env_id in STEP_TASKS:
+        return make_step_env(env_id, **kwargs)
     if env_id not in gym.registry:
-        known = sorted(k for k in gym.registry if k.startswith("vslbook/"))
+        known = sorted({k for k in gym.registry if k.startswith("vslbook/")} | set(STEP_TASKS))
         raise ValueError(f"unknown environment {env_id!r}; vslbook provides {', '.join(known)}")
     return gym.make(env_id, **kwargs)
