@@ -10,6 +10,7 @@ import pytest
 import torch
 from torch import nn
 
+from vslbook.bounds.dime import linear_gaussian_chain
 from vslbook.srl import (
     BatchRenorm1d,
     CategoricalSupport,
@@ -54,48 +55,16 @@ class LinearDrift(nn.Module):
         return self.slope * x + self.offset
 
 
-def _gaussian_kl(m0, s0, m1, s1) -> float:
-    """KL(N(m0, s0) || N(m1, s1)) for full covariances (float64 numpy)."""
-    k = len(m0)
-    s1_inv = np.linalg.inv(s1)
-    diff = m1 - m0
-    _, logdet0 = np.linalg.slogdet(s0)
-    _, logdet1 = np.linalg.slogdet(s1)
-    return 0.5 * (np.trace(s1_inv @ s0) + diff @ s1_inv @ diff - k + logdet1 - logdet0)
-
-
 def _closed_form(etas, sigma0, gen, noise):
     """Per dimension: x_0 mean/var and KL(generative joint || noising joint started at x_0).
 
     etas (N, d) in sampling order; gen = (slope, offsets (d,)) of f_θ; noise = the same for the
-    noising drift (zero slope/offset for DIME's fixed OU step). Chain order X = (x_N, ..., x_0).
+    noising drift (zero slope/offset for DIME's fixed OU step). See linear_gaussian_chain.
     """
-    n_steps, dims = etas.shape
-    means, variances, kls = [], [], []
-    for j in range(dims):
-        eta = etas[:, j]
-        # generative joint: X_0 = σ0 e_0, X_{k+1} = A_k X_k + η_k b + sqrt(2 η_k) e_{k+1}
-        lg, mg = np.zeros((n_steps + 1, n_steps + 1)), np.zeros(n_steps + 1)
-        lg[0, 0] = sigma0
-        for k in range(n_steps):
-            a = 1.0 + eta[k] * (gen[0] - 1.0 / sigma0**2)
-            lg[k + 1] = a * lg[k]
-            lg[k + 1, k + 1] = math.sqrt(2 * eta[k])
-            mg[k + 1] = a * mg[k] + eta[k] * gen[1][j]
-        cov_g = lg @ lg.T
-        m0, v0 = mg[-1], cov_g[-1, -1]
-        # noising joint: X_N = x_0 ~ N(m0, v0), X_k = B_k X_{k+1} + η_k b' + sqrt(2 η_k) e_k
-        lf, mf = np.zeros((n_steps + 1, n_steps + 1)), np.zeros(n_steps + 1)
-        lf[n_steps, n_steps], mf[n_steps] = math.sqrt(v0), m0
-        for k in range(n_steps - 1, -1, -1):
-            b = 1.0 + eta[k] * (noise[0] - 1.0 / sigma0**2)
-            lf[k] = b * lf[k + 1]
-            lf[k, k] = math.sqrt(2 * eta[k])
-            mf[k] = b * mf[k + 1] + eta[k] * noise[1][j]
-        kls.append(_gaussian_kl(mg, cov_g, mf, lf @ lf.T))
-        means.append(m0)
-        variances.append(v0)
-    return np.array(means), np.array(variances), np.array(kls)
+    chain = linear_gaussian_chain(
+        etas, sigma0, gen[0], np.array(gen[1]), noise[0], np.array(noise[1])
+    )
+    return chain.marginal_mean, chain.marginal_var, chain.kl
 
 
 @pytest.mark.parametrize("case", ["zero_network", "linear_drift", "general_bridges"])

@@ -6,6 +6,8 @@ them; a test calls :meth:`Check.require` or :meth:`CheckReport.require`.
 
 ``foundations``  Chapter 2: soft value iteration, self-paced curricula, mixture gating, the
                  Ornstein-Uhlenbeck forward process, KL chain rules, mutual information
+``dime``         Chapter 5: the entropy lower bound of a diffusion policy and its gap, the soft
+                 Bellman contraction, soft policy iteration
 """
 
 from __future__ import annotations
