@@ -18,6 +18,7 @@ from typing import Any
 #: Modules that register algorithms or figures when imported.
 PLUGIN_MODULES: tuple[str, ...] = (
     "vslbook.erl.pg",
+    "vslbook.srl.dime",
     "vslbook.figures",
 )
 
