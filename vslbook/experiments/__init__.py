@@ -1,0 +1,1 @@
+"""Experiments behind the figures: configuration in, numbers (or a run directory) out."""
