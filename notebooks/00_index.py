@@ -23,7 +23,7 @@
 # | 2 Foundations | `02_foundations` | max-entropy RL, ERL vs SRL, curricula, ProMP/DMP/ProDMP, mixtures of experts, diffusion, variational inference, mutual information | `vslbook.bounds.foundations`, `vslbook.dists`, `vslbook.movement`, `vslbook.erl.pg`, `vslbook.envs` |
 # | 3 SVSL | `03_svsl` (planned) | mixture of linear experts with per-expert context distributions, MORE / contextual MORE / REPS | `vslbook.erl` |
 # | 4 Di-SkilL | `04_diskill` (planned) | energy-based per-expert curricula, deep experts with trust-region projection layers | `vslbook.erl` |
-# | 5 DIME | `05_dime` (planned) | diffusion policies with an entropy lower bound, distributional CrossQ critic | `vslbook.srl` |
+# | 5 DIME | `05_dime` | the entropy lower bound of a diffusion policy and its gap, soft policy iteration, Figs. 5.1-5.3 and 5.7 live or from the published data, the chapter's ablations | `vslbook.bounds.dime`, `vslbook.srl`, `vslbook.envs.step_based`, `vslbook.experiments` |
 #
 # Numbers the thesis reports are always labelled as the thesis's; every other number
 # in these notebooks is computed by the code in this repository when the notebook runs.

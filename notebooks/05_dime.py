@@ -33,6 +33,7 @@ from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import torch
 from IPython.display import display
 
@@ -175,24 +176,34 @@ plt.show()
 
 # %%
 ENV = "dm_control/cheetah-run-v0"
-steps_full = budget.pick(smoke=600_000, reduced=1_000_000, full=1_000_000)
-ours = run_variants(ENV, {"DIME": ("dime", {"total_steps": steps_full})},
-                    seeds=budget.pick(smoke=1, reduced=2, full=10), budget=budget, root=RUNS,
-                    tables=TABLES / f"ch5-cheetah-{budget.name}")
-ours_curve = iqm_curve(ours.curve_rows().rename(columns={"step": "env_steps"}),
+cheetah = run_variants(
+    ENV,
+    # total_steps is a full-budget count (1M, like the published runs): 50k env steps at
+    # `reduced`; evaluation every 24k steps at `full` (as published), 6k at `reduced`.
+    {"DIME": ("dime", {"total_steps": 1_000_000,
+                       "eval_every": budget.pick(smoke=24_000, reduced=120_000, full=24_000)})},
+    seeds=budget.pick(smoke=1, reduced=1, full=10), budget=budget, root=RUNS,
+    tables=TABLES / f"ch5-cheetah-{budget.name}")
+ours_curve = iqm_curve(cheetah.curve_rows().rename(columns={"step": "env_steps"}),
                        x="env_steps", y="value", run="run", reps=budget.bootstrap_reps)
 published = iqm_curve(paper_curves("dmc_cheetah_run"), reps=budget.bootstrap_reps)
 horizon = max(ours_curve.env_steps.max(), 24_000)
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
 thesis_vs_ours(axes[0], published, ours_curve, budget=budget.name, title="cheetah-run, 1M steps")
-thesis_vs_ours(axes[1], published[published.env_steps <= 2 * horizon], ours_curve,
+thesis_vs_ours(axes[1], published[published.env_steps <= 1.05 * horizon], ours_curve,
                budget=budget.name, title="zoom on our budget")
 fig.tight_layout()
 save_figure(fig, f"fig5-3-cheetah-ours-vs-thesis-{budget.name}")
 plt.show()
-at = published.iloc[(published.env_steps - ours_curve.env_steps.max()).abs().argmin()]
-print(f"ours at {int(ours_curve.env_steps.max())} steps: IQM {ours_curve.iqm.iloc[-1]:.1f}; "
-      f"published at {int(at.env_steps)} steps: IQM {at.iqm:.1f} [{at.lo:.1f}, {at.hi:.1f}]")
+# Side by side at the published evaluation steps that our run reached (nearest eval of ours).
+side = pd.merge_asof(
+    published[published.env_steps <= ours_curve.env_steps.max()].sort_values("env_steps"),
+    ours_curve[["env_steps", "iqm"]].rename(columns={"env_steps": "ours_steps", "iqm": "ours"}),
+    left_on="env_steps", right_on="ours_steps", direction="nearest")
+side = side.rename(columns={"iqm": "thesis IQM", "lo": "thesis lo", "hi": "thesis hi"})
+print(f"{cheetah.evals.run.nunique()} seed(s) of ours; network: "
+      f"{live_network(budget) or 'the thesis sizes'}")
+display(side[["env_steps", "thesis IQM", "thesis lo", "thesis hi", "ours_steps", "ours"]].round(1))
 
 # %% [markdown]
 # ## 5. Ablations at the active budget
@@ -222,10 +233,13 @@ variants = {
     "fixed β": ("dime", {"learn_beta": False}),
     "CrossQ": ("crossq", {}),
 }
-common = {"total_steps": budget.pick(smoke=125_000, reduced=400_000, full=1_000_000),
-          "learning_starts": budget.pick(smoke=100, reduced=2000, full=5000),
-          "eval_every": 20_000, "v_min": -1600.0, "v_max": 100.0}
-abl = run_variants("Pendulum-v1", variants, seeds=budget.pick(smoke=1, reduced=2, full=10),
+# Full-budget counts, scaled by the budget: 250 env steps at smoke, 8k at reduced. The
+# networks are 64 wide at smoke and reduced (eight variants must fit in a CPU session).
+common = {"total_steps": budget.pick(smoke=125_000, reduced=160_000, full=1_000_000),
+          "learning_starts": budget.pick(smoke=100, reduced=1000, full=5000),
+          "eval_every": 20_000, "v_min": -1600.0, "v_max": 100.0,
+          **budget.pick(smoke={}, reduced={"critic_hidden": 64, "actor_hidden": 64}, full={})}
+abl = run_variants("Pendulum-v1", variants, seeds=budget.pick(smoke=1, reduced=1, full=10),
                    budget=budget, root=RUNS, tables=TABLES / f"ch5-ablations-{budget.name}",
                    common=common)
 fig, ax = plt.subplots(figsize=(7, 4))
@@ -255,9 +269,10 @@ from vslbook.envs.point_mass import GOALS
 
 alphas = (0.01, 1.0)
 pm_variants = {f"α = {a:g}": ("dime", {"fixed_alpha": a, "use_target_network": True,
-                                         "total_steps": budget.pick(smoke=150_000, reduced=1_000_000, full=1_000_000),
-                                         "learning_starts": budget.pick(smoke=100, reduced=2000, full=5000),
-                                         "eval_every": 100_000})
+                                         "total_steps": budget.pick(smoke=150_000, reduced=200_000, full=1_000_000),
+                                         "learning_starts": budget.pick(smoke=100, reduced=1000, full=5000),
+                                         "eval_every": 100_000,
+                                         **budget.pick(smoke={}, reduced={"critic_hidden": 64, "actor_hidden": 64}, full={})})
                for a in alphas}
 pm = run_variants("vslbook/PointMassFourGoals-v0", pm_variants, seeds=1, budget=budget,
                   root=RUNS, tables=TABLES / f"ch5-pointmass-{budget.name}")

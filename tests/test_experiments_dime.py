@@ -45,6 +45,7 @@ def test_run_variants_labels_rows_and_reloads_agents(tmp_path):
         root=tmp_path / "runs",
         tables=tmp_path / "tables",
         common=TINY,
+        progress=False,
     )
     assert sorted(out.runs) == ["a", "b"] and all(len(r) == 2 for r in out.runs.values())
     rows = out.curve_rows()

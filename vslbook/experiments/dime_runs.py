@@ -63,12 +63,15 @@ def run_variants(
     root: str | Path,
     tables: str | Path,
     common: Mapping[str, Any] | None = None,
+    progress: bool = True,
 ) -> VariantRuns:
     """Train every ``{label: (algo, overrides)}`` for ``seeds`` seeds.
 
     Overrides are applied over :func:`live_network` and ``common``. The metrics are written
     by :func:`vslbook.results.collect_runs` to ``tables`` and read back through its sha256
-    check, so the returned table is exactly what a later analysis would load.
+    check, so the returned table is exactly what a later analysis would load. Finished runs
+    are reused and interrupted ones resume (:func:`vslbook.training.run`); ``progress``
+    shows a bar per run.
     """
     if seeds < 1:
         raise ValueError(f"seeds must be >= 1, got {seeds}")
@@ -80,7 +83,7 @@ def run_variants(
     for label, (algo, overrides) in variants.items():
         for seed in range(seeds):
             over = {**live_network(bud), **(common or {}), **overrides}
-            rd = run(algo, env, seed, bud, root=root, overrides=over, progress=False)
+            rd = run(algo, env, seed, bud, root=root, overrides=over, progress=progress)
             labels[rd.name] = label
             by_label.setdefault(label, []).append(rd)
     collect_runs([rd for rds in by_label.values() for rd in rds], tables)
