@@ -233,9 +233,9 @@ variants = {
     "fixed β": ("dime", {"learn_beta": False}),
     "CrossQ": ("crossq", {}),
 }
-# Full-budget counts, scaled by the budget: 250 env steps at smoke, 8k at reduced. The
+# Full-budget counts, scaled by the budget: 250 env steps at smoke, 6k at reduced. The
 # networks are 64 wide at smoke and reduced (eight variants must fit in a CPU session).
-common = {"total_steps": budget.pick(smoke=125_000, reduced=160_000, full=1_000_000),
+common = {"total_steps": budget.pick(smoke=125_000, reduced=120_000, full=1_000_000),
           "learning_starts": budget.pick(smoke=100, reduced=1000, full=5000),
           "eval_every": 20_000, "v_min": -1600.0, "v_max": 100.0,
           **budget.pick(smoke={}, reduced={"critic_hidden": 64, "actor_hidden": 64}, full={})}
@@ -269,7 +269,7 @@ from vslbook.envs.point_mass import GOALS
 
 alphas = (0.01, 1.0)
 pm_variants = {f"α = {a:g}": ("dime", {"fixed_alpha": a, "use_target_network": True,
-                                         "total_steps": budget.pick(smoke=150_000, reduced=200_000, full=1_000_000),
+                                         "total_steps": budget.pick(smoke=150_000, reduced=150_000, full=1_000_000),
                                          "learning_starts": budget.pick(smoke=100, reduced=1000, full=5000),
                                          "eval_every": 100_000,
                                          **budget.pick(smoke={}, reduced={"critic_hidden": 64, "actor_hidden": 64}, full={})})

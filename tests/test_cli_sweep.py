@@ -1,3 +1,4 @@
+import re
 import shutil
 import subprocess
 import sys
@@ -104,3 +105,24 @@ def test_sweep_rejects_bad_input(tmp_path):
         sweep("erl-pg", [ENV], [0], executor="k8s", root=tmp_path)
     with pytest.raises(ValueError, match="has no field 'nope'"):
         sweep("erl-pg", [ENV], [0], grid={"nope": [1]}, root=tmp_path, executor="debug")
+
+
+def test_set_parses_optional_and_boolean_fields():
+    from vslbook.registry import config_from_overrides, config_from_record
+    from vslbook.srl.dime import DIMEConfig
+
+    cfg = config_from_overrides(
+        DIMEConfig,
+        {"fixed_alpha": "0.1", "v_min": "-10", "v_max": "10", "learn_beta": "false",
+         "critic": "scalar", "n_diffusion_steps": "2"},
+    )  # fmt: skip
+    assert (cfg.fixed_alpha, cfg.v_min, cfg.v_max) == (0.1, -10.0, 10.0)
+    assert (cfg.learn_beta, cfg.critic, cfg.n_diffusion_steps) == (False, "scalar", 2)
+    assert config_from_overrides(DIMEConfig, {"fixed_alpha": "none"}).fixed_alpha is None
+    message = re.escape("cannot convert fixed_alpha='abc' to float | None")
+    with pytest.raises(ValueError, match=message):
+        config_from_overrides(DIMEConfig, {"fixed_alpha": "abc"})
+    with pytest.raises(ValueError, match="cannot convert learn_beta='maybe' to bool"):
+        config_from_overrides(DIMEConfig, {"learn_beta": "maybe"})
+    record = {"algo": "dime", "env": "Pendulum-v1", "seed": 0, "budget": "smoke", "utd": 3}
+    assert config_from_record(DIMEConfig, record).utd == 3

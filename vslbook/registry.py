@@ -105,8 +105,31 @@ def get_figure(fig_id: str) -> Figure:
     return FIGURES[fig_id]
 
 
+def _convert(config_cls: type, field: Any, value: str) -> Any:
+    """Parse the command-line string ``value`` for ``field`` (its default or annotation)."""
+    default = getattr(config_cls(), field.name)
+    annotation = str(field.type)
+    if default is None or "None" in annotation:  # an optional field: "none" clears it
+        if value.strip().lower() in ("none", "null"):
+            return None
+        for name, kind in (("bool", bool), ("int", int), ("float", float), ("str", str)):
+            if name in annotation:
+                default = kind()
+                break
+    if isinstance(default, bool):
+        if value.lower() not in ("true", "false", "1", "0"):
+            raise ValueError(f"expected true/false/1/0, got {value!r}")
+        return value.lower() in ("true", "1")
+    if default is None:
+        return value
+    return type(default)(value)
+
+
 def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) -> Any:
     """Build ``config_cls`` with ``overrides``, converting strings to the field's type.
+
+    Strings (from ``--set key=value``) are parsed by the field's default or annotation;
+    ``none`` clears an optional field (e.g. ``fixed_alpha=none``).
 
     Raises:
         ValueError: for a field the config does not have (the message lists the valid ones)
@@ -121,18 +144,23 @@ def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) ->
             raise ValueError(
                 f"{config_cls.__name__} has no field {key!r}; expected one of {', '.join(fields)}"
             )
-        default = getattr(config_cls(), key)
-        if isinstance(value, str) and not isinstance(default, str):
+        if isinstance(value, str) and str(fields[key].type) != "str":
             try:
-                if isinstance(default, bool):
-                    if value.lower() not in ("true", "false", "1", "0"):
-                        raise ValueError(value)
-                    value = value.lower() in ("true", "1")
-                else:
-                    value = type(default)(value)
+                value = _convert(config_cls, fields[key], value)
             except (TypeError, ValueError) as err:
-                raise ValueError(
-                    f"cannot convert {key}={value!r} to {type(default).__name__}"
-                ) from err
+                kind = str(fields[key].type)
+                raise ValueError(f"cannot convert {key}={value!r} to {kind}") from err
         kwargs[key] = value
     return config_cls(**kwargs)
+
+
+def config_from_record(config_cls: type, record: dict[str, Any]) -> Any:
+    """Build ``config_cls`` from a run's config record, ignoring keys it has no field for.
+
+    A record (``RunDir.config``) holds ``algo``, ``env``, ``seed`` and ``budget`` beside
+    the algorithm's fields.
+    """
+    import dataclasses
+
+    names = {f.name for f in dataclasses.fields(config_cls)}
+    return config_cls(**{k: v for k, v in record.items() if k in names})

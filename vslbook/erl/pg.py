@@ -24,7 +24,7 @@ from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.envs import make
-from vslbook.registry import register_algorithm
+from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir, restore_rng_state, rng_state
 
 
@@ -77,7 +77,7 @@ def train(
 ) -> dict | None:
     """Train in ``run``; resume from its checkpoint if there is one. Returns a summary when
     finished, None when stopped early by ``stop_after``."""
-    cfg = ERLPGConfig(**{k: v for k, v in config.items() if k in ERLPGConfig.__dataclass_fields__})
+    cfg = config_from_record(ERLPGConfig, config)
     env = make(config["env"]).unwrapped
     n_iter = budget.scale(cfg.iterations, minimum=20)
     rng = np.random.default_rng(config["seed"])

@@ -98,16 +98,13 @@ def load_agent(run_dir: RunDir):
     Returns ``(agent, env)``: the :class:`vslbook.srl.dime.Agent` in eval mode and a fresh
     environment of the run's task.
     """
-    import dataclasses
-
     from vslbook.envs import make
-    from vslbook.registry import get_algorithm
+    from vslbook.registry import config_from_record, get_algorithm
     from vslbook.srl.dime import default_value_range, make_agent
 
     config = run_dir.config
     spec = get_algorithm(config["algo"])
-    fields = {f.name for f in dataclasses.fields(spec.config)}
-    cfg = spec.config(**{k: v for k, v in config.items() if k in fields})
+    cfg = config_from_record(spec.config, config)
     env = make(config["env"])
     v_min, v_max = cfg.v_min, cfg.v_max
     if cfg.critic == "distributional" and v_min is None:

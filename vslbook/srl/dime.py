@@ -45,7 +45,6 @@ the numbers an uninterrupted run logs on CPU (all metrics except the wall-clock 
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import time
 import warnings
@@ -61,7 +60,7 @@ from torch import Tensor, nn
 from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
-from vslbook.registry import register_algorithm
+from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir, restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
 from vslbook.srl.c51 import CategoricalSupport, categorical_loss
@@ -681,8 +680,7 @@ def train(
     first episode end after that many steps. Returns a summary when finished, None when
     stopped early.
     """
-    fields = {f.name for f in dataclasses.fields(config_cls)}
-    cfg = config_cls(**{k: v for k, v in config.items() if k in fields})
+    cfg = config_from_record(config_cls, config)
     env_id, seed = config["env"], int(config["seed"])
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
