@@ -213,7 +213,7 @@ display(side[["env_steps", "thesis IQM", "thesis lo", "thesis hi", "ours_steps",
 #
 # | label | thesis figure | change |
 # |---|---|---|
-# | DIME | — | 4 diffusion steps at smoke/reduced (see the top), 16 at full |
+# | DIME | — | 4 diffusion steps and 64-wide networks at smoke/reduced, the thesis's sizes at full |
 # | 2 steps | 5.2c | `n_diffusion_steps=2` |
 # | fixed α = 0.1 | 5.4a–b | `fixed_alpha=0.1` |
 # | Gaussian | 5.4c–d | `dime-gaussian`: same critic and update, tanh-Gaussian policy |

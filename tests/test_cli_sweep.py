@@ -1,7 +1,9 @@
+import json
 import re
 import shutil
 import subprocess
 import sys
+from pathlib import Path
 
 import pytest
 import yaml
@@ -126,3 +128,30 @@ def test_set_parses_optional_and_boolean_fields():
         config_from_overrides(DIMEConfig, {"learn_beta": "maybe"})
     record = {"algo": "dime", "env": "Pendulum-v1", "seed": 0, "budget": "smoke", "utd": 3}
     assert config_from_record(DIMEConfig, record).utd == 3
+
+
+# DIME through the command line: tiny networks, one Pendulum episode at the smoke budget.
+DIME_TINY = [
+    "total_steps=100000", "learning_starts=0", "critic_hidden=16", "actor_hidden=16",
+    "n_diffusion_steps=2", "batch_size=16", "eval_episodes=1", "v_min=-1600", "v_max=100",
+    "num_threads=1",
+]  # fmt: skip
+
+
+def test_dime_runs_and_sweeps_from_the_command_line(tmp_path, capsys):
+    common = ["--env", "Pendulum-v1", "--budget", "smoke", "--root", str(tmp_path)]
+    assert main(["run", "dime", "--seed", "0", *common, "--no-progress",
+                 "--set", *DIME_TINY, "fixed_alpha=0.2"]) == 0  # fmt: skip
+    out = capsys.readouterr().out
+    assert '"env_steps": 200' in out
+    config = json.loads((Path(out.splitlines()[0]) / "config.json").read_text())
+    assert (config["algo"], config["fixed_alpha"], config["v_min"]) == ("dime", 0.2, -1600.0)
+
+    grid = [*DIME_TINY, "n_diffusion_steps=1,2"]
+    grid = [g for g in grid if not g.startswith("n_diffusion_steps=2")]
+    assert main(["sweep", "dime", *common, "--seeds", "0", "--executor", "debug",
+                 "--grid", *grid]) == 0  # fmt: skip
+    paths = [Path(p) for p in capsys.readouterr().out.split()]
+    assert len(paths) == 2 and all((p / "DONE").exists() for p in paths)
+    steps = sorted(json.loads((p / "config.json").read_text())["n_diffusion_steps"] for p in paths)
+    assert steps == [1, 2]
