@@ -5,7 +5,7 @@ episodes); it never changes an algorithm or a hyper-parameter. The active preset
 from the environment variable ``VSLBOOK_BUDGET`` (default ``reduced``):
 
 ``smoke``    every notebook in about a minute on 2 CPU cores: CI, "does it run".
-``reduced``  a chapter in minutes to tens of minutes on a laptop; large enough for the
+``reduced``  a chapter in minutes to about an hour on a laptop; large enough for the
              qualitative result of a figure to show.
 ``full``     the thesis's own budgets (iterations, steps, 10 seeds): meant for a cluster
              through :mod:`vslbook.sweep`.
