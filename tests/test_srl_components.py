@@ -21,7 +21,7 @@ from vslbook.srl import (
     GaussianPolicy,
     ScalarCritic,
     categorical_loss,
-    cosine_profile,
+    cosine_schedule,
     polyak_update,
     tanh_log_det_jacobian,
 )
@@ -76,7 +76,7 @@ def test_entropy_bound_matches_closed_form_in_linear_gaussian_chain(case):
     """
     torch.manual_seed(0)
     cfg = DiffusionPolicyConfig(
-        n_steps=3, sigma0=1.5, total_time=3.0, squash=False,
+        n_steps=3, sigma0=1.5, dt=3.0, squash=False,
         general_bridges=case == "general_bridges", **SMALL,
     )
     policy = DiffusionPolicy(obs_dim=3, act_dim=2, config=cfg)
@@ -357,16 +357,25 @@ def test_critic_variants_shapes_and_plain_critic_with_target_network():
 # ---------------------------------------------------------------------------------- policies
 
 
-def test_step_size_and_noise_parameterisation():
-    cfg = DiffusionPolicyConfig(n_steps=16, **SMALL)
-    policy = DiffusionPolicy(4, 3, cfg)
-    profile = cosine_profile(16)
-    assert_close(profile.sum(), torch.tensor(1.0))
-    assert (profile > 0).all() and (profile[1:] < profile[:-1]).all()
-    assert_close(policy.total_time, torch.tensor(0.1))
-    assert_close(policy.noise_var, torch.ones(3))
-    assert_close(policy.step_sizes.sum(0), 0.1 * policy.noise_var)
-    assert policy.step_sizes.shape == (16, 3)
+@pytest.mark.parametrize(
+    ("n_steps", "first", "last", "total"),
+    # dt_n = 0.1 · (0.999 cos²(½π (1.008 - t_n)/1.008) + 0.001), t_n = (N - n)/N, by hand:
+    # N = 16: t = 1 -> 0.1 · (0.999 cos²(0.01246) + 0.001) = 0.099984; t = 1/16 -> 0.0010446
+    [(16, 0.099984, 0.0010446, 0.84437), (4, 0.099984, 0.014511, 0.24863)],
+)
+def test_step_sizes_follow_the_unnormalised_cosine_schedule(n_steps, first, last, total):
+    """Step sizes of the released DIME code: first ≈ 0.1, last ≈ 0.001, total ≈ 0.84 at N = 16."""
+    policy = DiffusionPolicy(4, 3, DiffusionPolicyConfig(n_steps=n_steps, **SMALL))
+    assert_close(policy.dt_scale, torch.tensor(0.1))
+    assert_close(policy.noise_var, torch.ones(3))  # σ² = 1 at init, so η_n = dt_n
+    dt = policy.step_sizes[:, 0].double()
+    assert policy.step_sizes.shape == (n_steps, 3)
+    assert abs(dt[0].item() - first) < 2e-6 and abs(dt[-1].item() - last) < 2e-6
+    assert abs(dt.sum().item() - total) < 2e-5
+    assert (dt[1:] < dt[:-1]).all()  # large steps away from the prior, small ones at the action
+    schedule = cosine_schedule(n_steps)
+    assert schedule.sum() > 1.0  # not normalised
+    assert_close(policy.step_sizes, 0.1 * schedule[:, None] * policy.noise_var)
 
 
 @pytest.mark.parametrize("general_bridges", [False, True])
@@ -381,7 +390,7 @@ def test_gradients_reach_score_network_step_size_and_noise(general_bridges):
     nets = [policy.score_net] + ([policy.noising_net] if general_bridges else [])
     for net in nets:
         assert net.out.weight.grad.abs().sum() > 0
-    assert policy.raw_total_time.grad.abs() > 0
+    assert policy.raw_dt.grad.abs() > 0
     assert policy.raw_noise.grad.abs().sum() > 0
 
     frozen = DiffusionPolicy(3, 2, DiffusionPolicyConfig(n_steps=3, learn_beta=False, **SMALL))
@@ -439,7 +448,7 @@ def test_gaussian_policy_log_prob_and_interface():
         (lambda: DiffusionPolicyConfig(n_steps=-4), "n_steps must be >= 1"),
         (lambda: DiffusionPolicyConfig(sigma0=0.0), "sigma0 must be > 0"),
         (lambda: DiffusionPolicyConfig(sigma0=-2.5), "sigma0 must be > 0"),
-        (lambda: DiffusionPolicyConfig(total_time=0.0), "total_time must be > 0"),
+        (lambda: DiffusionPolicyConfig(dt=0.0), "dt must be > 0"),
         (lambda: DiffusionPolicyConfig(sigma_init=-1.0), "sigma_init must be > 0"),
         (lambda: DiffusionPolicyConfig(freq_min=0.0), "freq_min"),
         (lambda: BatchRenorm1d(4, momentum=1.0), "momentum must be in"),

@@ -52,7 +52,12 @@ from vslbook.bounds.foundations import (
     soft_value_iteration,
 )
 from vslbook.dists import gaussian_kl
-from vslbook.srl.diffusion_policy import DiffusionPolicy, DiffusionPolicyConfig, PolicySample
+from vslbook.srl.diffusion_policy import (
+    DiffusionPolicy,
+    DiffusionPolicyConfig,
+    PolicySample,
+    cosine_schedule,
+)
 
 __all__ = [
     "AffineScore",
@@ -113,8 +118,9 @@ def linear_gaussian_policy(
         x_N ~ N(0, sigma0^2),  x_{n-1} = x_n + eta_n (-x_n / sigma0^2 + slope x_n + offset)
                                           + sqrt(2 eta_n) eps_n
 
-    is linear-Gaussian. ``seed`` seeds the (irrelevant) network initialisation without touching
-    torch's global random state.
+    is linear-Gaussian, with the step sizes of DIME's cosine schedule scaled so that
+    ``sum_n dt_n = total_time``. ``seed`` seeds the (irrelevant) network initialisation without
+    touching torch's global random state.
     """
     noise_var = np.asarray(noise_var, dtype=float)
     slope, offset = np.asarray(slope, dtype=float), np.asarray(offset, dtype=float)
@@ -125,12 +131,15 @@ def linear_gaussian_policy(
         )
     if not np.all(noise_var > 0):
         raise ValueError(f"noise_var must be positive, got {noise_var}")
+    n_steps = _count("n_steps", n_steps)
+    # dt scale chosen so that the unnormalised cosine schedule sums to ``total_time``
+    dt = _positive("total_time", total_time) / float(cosine_schedule(n_steps).sum())
     config = DiffusionPolicyConfig(
-        n_steps=_count("n_steps", n_steps),
+        n_steps=n_steps,
         sigma0=_positive("sigma0", sigma0),
-        total_time=_positive("total_time", total_time),
+        dt=dt,
         learn_beta=False,
-        learn_total_time=False,
+        learn_dt=False,
         n_frequencies=8,
         hidden=16,
         n_layers=1,

@@ -66,7 +66,7 @@ def fit_boltzmann(
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
     cfg = DiffusionPolicyConfig(n_steps=n_steps, sigma0=1.0, hidden=hidden, n_frequencies=32,
-                                squash=False, total_time=1.0)
+                                squash=False)
     policy = DiffusionPolicy(obs_dim=1, act_dim=1, config=cfg)
     opt = torch.optim.Adam(policy.parameters(), lr=lr)
     obs = torch.zeros(batch, 1)

@@ -23,7 +23,7 @@ from vslbook.srl.diffusion_policy import (
     DiffusionPolicyConfig,
     PolicySample,
     ScoreNetwork,
-    cosine_profile,
+    cosine_schedule,
     tanh_log_det_jacobian,
 )
 from vslbook.srl.gaussian_policy import GaussianPolicy
@@ -40,7 +40,7 @@ __all__ = [
     "ScalarCritic",
     "ScoreNetwork",
     "categorical_loss",
-    "cosine_profile",
+    "cosine_schedule",
     "critic_mlp",
     "polyak_update",
     "tanh_log_det_jacobian",

@@ -7,9 +7,11 @@ written with the prior p_N = N(0, σ0² I) and its score ∇log p_N(x) = -x / σ
     x_{n-1} = x_n + η_n (∇log p_N(x_n) + f_θ(x_n, n, s)) + sqrt(2 η_n) ε_n,   n = N, ..., 1
     a = tanh(x_0)
 
-with per-dimension step sizes η_n = dt_n σ², dt_n = T · c_n (c a cosine profile summing to
-one, T = softplus(θ_T) learned, 0.1 at init) and learned per-dimension scales
-σ_d² = 1 / softplus(φ_d) (Fig. C.2). The kernels, with their exact conditional means, are
+with per-dimension step sizes η_n = dt_n σ², dt_n = softplus(θ_T) · s(n), a learned scale
+softplus(θ_T) (0.1 at init) times the cosine schedule s(n) of :func:`cosine_schedule`, which
+is *not* normalised (at N = 16 the steps run from ≈ 0.1 down to ≈ 0.001 and sum to ≈ 0.84),
+and learned per-dimension scales σ_d² = 1 / softplus(φ_d) (Fig. C.2). The kernels, with their
+exact conditional means, are
 
     generative  π_{n-1|n}(x_{n-1} | x_n)  = N(x_{n-1}; x_n + η_n (∇log p_N(x_n) + f_θ), 2 η_n I)
     noising     →π_{n|n-1}(x_n | x_{n-1}) = N(x_n; x_{n-1} + η_n ∇log p_N(x_{n-1}), 2 η_n I)
@@ -97,32 +99,41 @@ def _softplus_inverse(y: float) -> float:
     return y + math.log(-math.expm1(-y))
 
 
-def cosine_profile(n_steps: int, offset: float = 0.008) -> Tensor:
-    """Relative step sizes c_k ∝ cos²(π/2 · (k/N + offset)/(1 + offset)), Σ c_k = 1.
+def cosine_schedule(n_steps: int, offset: float = 0.008, floor: float = 0.001) -> Tensor:
+    """The relative step sizes s(n), n = 0..N-1, in sampling order (n = 0 starts from x_N).
 
-    Index k = 0 is the first sampling step (from x_N); steps shrink towards the action x_0.
+        s(n) = (1 - floor) · cos²(½π (1 + offset - t_n) / (1 + offset)) + floor,  t_n = (N - n)/N
+
+    The schedule is *not* normalised: s(0) ≈ 1 and s(N-1) is small (≈ 0.0105 at N = 16), so with
+    the initial scale softplus(θ_T) = 0.1 the first step is ≈ 0.1, the last ≈ 0.001 and the
+    total ≈ 0.84 at N = 16 (≈ 0.10, 0.015 and 0.25 at N = 4). This is the cosine schedule of
+    the authors' released code (offset 0.008, minimum 0.001, one learned scale for all steps);
+    the thesis names it (Appendix C.4, Fig. C.2) without printing it.
     """
-    phase = (torch.arange(n_steps, dtype=torch.float64) / n_steps + offset) / (1.0 + offset)
-    profile = torch.cos(0.5 * math.pi * phase) ** 2
-    return (profile / profile.sum()).float()
+    if isinstance(n_steps, bool) or not isinstance(n_steps, int) or n_steps < 1:
+        raise ValueError(f"n_steps must be an integer >= 1, got {n_steps!r}")
+    t = (n_steps - torch.arange(n_steps, dtype=torch.float64)) / n_steps
+    phase = 0.5 * math.pi * (1.0 + offset - t) / (1.0 + offset)
+    return ((1.0 - floor) * torch.cos(phase) ** 2 + floor).float()
 
 
 @dataclass(frozen=True)
 class DiffusionPolicyConfig:
     """Sampler and score-network settings; defaults follow Table C.2 / Appendix C.4.
 
-    ``sigma0`` is the prior's standard deviation; ``total_time`` the initial value of
-    T = softplus(θ_T) = Σ_n dt_n; ``sigma_init`` the initial per-dimension noise scale σ_d;
-    ``learn_beta`` learns σ_d (Fig. C.2) and ``learn_total_time`` learns T. ``squash`` puts a
+    ``sigma0`` is the prior's standard deviation; ``dt`` the initial value of the step-size
+    scale softplus(θ_T) in dt_n = softplus(θ_T) · s(n) (:func:`cosine_schedule`; 0.1, so the
+    first step is ≈ 0.1); ``sigma_init`` the initial per-dimension noise scale σ_d;
+    ``learn_beta`` learns σ_d (Fig. C.2) and ``learn_dt`` learns the scale. ``squash`` puts a
     tanh on x_0 (switch it off for unbounded actions or closed-form checks).
     """
 
     n_steps: int = 16
     sigma0: float = 2.5
-    total_time: float = 0.1
+    dt: float = 0.1
     sigma_init: float = 1.0
     learn_beta: bool = True
-    learn_total_time: bool = True
+    learn_dt: bool = True
     n_frequencies: int = 256
     freq_min: float = 0.1
     freq_max: float = 100.0
@@ -137,7 +148,7 @@ class DiffusionPolicyConfig:
         for name in ("n_steps", "n_frequencies", "hidden", "n_layers"):
             if getattr(self, name) < 1:
                 raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
-        for name in ("sigma0", "total_time", "sigma_init", "out_clip"):
+        for name in ("sigma0", "dt", "sigma_init", "out_clip"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if self.out_init_scale < 0:
@@ -204,16 +215,16 @@ class DiffusionPolicy(nn.Module):
         self.noising_net = ScoreNetwork(obs_dim, act_dim, c) if c.general_bridges else None
         if self.noising_net is not None:
             nn.init.zeros_(self.noising_net.out.weight)
-        self.register_buffer("step_profile", cosine_profile(c.n_steps))
-        raw_time = torch.tensor(_softplus_inverse(c.total_time))
+        self.register_buffer("schedule", cosine_schedule(c.n_steps))
+        raw_dt = torch.tensor(_softplus_inverse(c.dt))
         raw_noise = torch.full((act_dim,), _softplus_inverse(1.0 / c.sigma_init**2))
-        self.raw_total_time = nn.Parameter(raw_time, requires_grad=c.learn_total_time)
+        self.raw_dt = nn.Parameter(raw_dt, requires_grad=c.learn_dt)
         self.raw_noise = nn.Parameter(raw_noise, requires_grad=c.learn_beta)
 
     @property
-    def total_time(self) -> Tensor:
-        """T = softplus(θ_T) = Σ_n dt_n."""
-        return F.softplus(self.raw_total_time)
+    def dt_scale(self) -> Tensor:
+        """softplus(θ_T), the learned scale of the step sizes dt_n = softplus(θ_T) · s(n)."""
+        return F.softplus(self.raw_dt)
 
     @property
     def noise_var(self) -> Tensor:
@@ -222,8 +233,10 @@ class DiffusionPolicy(nn.Module):
 
     @property
     def step_sizes(self) -> Tensor:
-        """η (N, act_dim) in sampling order: row k is the step from x_{N-k} to x_{N-k-1}."""
-        return (self.total_time * self.step_profile)[:, None] * self.noise_var
+        """η (N, act_dim) in sampling order: row k is the step from x_{N-k} to x_{N-k-1}.
+
+        η_k = dt_k σ² with dt_k = softplus(θ_T) · s(k) (:func:`cosine_schedule`)."""
+        return (self.dt_scale * self.schedule)[:, None] * self.noise_var
 
     def prior_score(self, x: Tensor) -> Tensor:
         """∇ log N(x; 0, σ0² I) = -x / σ0²."""
