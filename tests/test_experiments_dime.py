@@ -67,7 +67,7 @@ def test_run_variants_labels_rows_and_reloads_agents(tmp_path):
 def test_run_variants_rejects_bad_arguments(tmp_path):
     from vslbook.experiments.dime_runs import run_variants
 
-    with pytest.raises(ValueError, match="seeds must be >= 1, got 0"):
+    with pytest.raises(ValueError, match="seeds must be an integer >= 1, got 0"):
         run_variants("Pendulum-v1", {"a": ("dime", {})}, seeds=0, root=tmp_path, tables=tmp_path)
     with pytest.raises(ValueError, match="variants is empty"):
         run_variants("Pendulum-v1", {}, seeds=1, root=tmp_path, tables=tmp_path)

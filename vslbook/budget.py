@@ -51,6 +51,25 @@ class Budget:
             raise ValueError(f"full-budget count must be >= 0, got {full}")
         return max(int(minimum), int(round(full * self.fraction)))
 
+    def full_count(self, count: int) -> int:
+        """The full-budget count that this budget scales to exactly ``count``.
+
+        For experiments that are not the thesis's (so have no thesis count to scale) and
+        state their length per budget: ``budget.full_count(budget.pick(smoke=5_200, ...))``.
+
+        Raises:
+            ValueError: ``count`` is negative, or no integer full count scales to it.
+        """
+        if isinstance(count, bool) or not isinstance(count, int) or count < 0:
+            raise ValueError(f"count must be an integer >= 0, got {count!r}")
+        full = int(round(count / self.fraction))
+        if self.scale(full, minimum=0) != count:
+            raise ValueError(
+                f"no full-budget count scales to {count} at budget {self.name!r} "
+                f"(fraction {self.fraction:g}); pick a multiple of {1 / self.fraction:g}"
+            )
+        return full
+
     def pick(self, *, smoke: T, reduced: T, full: T) -> T:
         """Choose one of three explicitly given values by budget name."""
         return {"smoke": smoke, "reduced": reduced, "full": full}[self.name]

@@ -31,17 +31,59 @@ def _pairs(items: Sequence[str] | None, *, lists: bool) -> dict:
     return out
 
 
+def _seed(text: str) -> int:
+    """argparse type of a seed: an integer >= 0, with a clear message otherwise."""
+    try:
+        seed = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
+    if seed < 0:
+        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
+    return seed
+
+
+def _algorithm_list() -> str:
+    """The registered algorithms, one a line, for the help of ``run`` and ``sweep``."""
+    load_plugins()
+    lines = ["registered algorithms (vslbook algorithms):"]
+    for name, algo in sorted(ALGORITHMS.items()):
+        lines.append(f"  {name:16s} {algo.doc}")
+        if algo.envs:
+            lines.append(f"  {'':16s} envs: {', '.join(algo.envs)}")
+    return "\n".join(lines)
+
+
+class _SubParser(argparse.ArgumentParser):
+    """A sub-command parser; with ``list_algorithms`` its help ends with the algorithms.
+
+    The list is built only when help is shown, so other commands do not import the
+    algorithm modules (and torch) just to parse their arguments.
+    """
+
+    def __init__(self, *args, list_algorithms: bool = False, **kwargs) -> None:
+        if list_algorithms:
+            kwargs.setdefault("formatter_class", argparse.RawDescriptionHelpFormatter)
+        super().__init__(*args, **kwargs)
+        self.list_algorithms = list_algorithms
+
+    def format_help(self) -> str:
+        if self.list_algorithms and self.epilog is None:
+            self.epilog = _algorithm_list()
+        return super().format_help()
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="vslbook", description=__doc__.split("\n\n")[0])
-    sub = p.add_subparsers(dest="command", required=True)
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_SubParser)
+    algo_help = {"list_algorithms": True}
     sub.add_parser("budgets", help="list the budget presets")
     sub.add_parser("algorithms", help="list registered algorithms")
     sub.add_parser("figures", help="list registered figures")
 
-    r = sub.add_parser("run", help="train one algorithm on one env with one seed")
-    r.add_argument("algo")
-    r.add_argument("--env", required=True)
-    r.add_argument("--seed", type=int, default=0)
+    r = sub.add_parser("run", help="train one algorithm on one env with one seed", **algo_help)
+    r.add_argument("algo", help="a registered algorithm (listed below)")
+    r.add_argument("--env", required=True, help="environment id, e.g. vslbook/PointReach-v0")
+    r.add_argument("--seed", type=_seed, default=0, help="integer >= 0 (default 0)")
     r.add_argument(
         "--budget",
         default=None,
@@ -50,11 +92,18 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--root", default="runs", help="folder for run directories")
     r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="override config fields")
     r.add_argument("--no-progress", action="store_true")
+    r.add_argument(
+        "--reuse-stale",
+        action="store_true",
+        help="reuse or resume a run directory made by other code (prints a warning)",
+    )
 
-    s = sub.add_parser("sweep", help="train a grid of configs and seeds via submitit")
-    s.add_argument("algo")
-    s.add_argument("--env", action="append", required=True)
-    s.add_argument("--seeds", type=int, nargs="*", default=None)
+    s = sub.add_parser(
+        "sweep", help="train a grid of configs and seeds via submitit", **algo_help
+    )
+    s.add_argument("algo", help="a registered algorithm (listed below)")
+    s.add_argument("--env", action="append", required=True, help="environment id (repeatable)")
+    s.add_argument("--seeds", type=_seed, nargs="*", default=None)
     s.add_argument("--budget", default=None)
     s.add_argument("--root", default="runs")
     s.add_argument("--grid", nargs="*", metavar="KEY=V1,V2", help="grid over config fields")
@@ -105,8 +154,12 @@ def _dispatch(args: argparse.Namespace) -> int:
             root=args.root,
             overrides=_pairs(args.set, lists=False),
             progress=not args.no_progress,
+            reuse_stale=True if args.reuse_stale else None,
         )
         print(rd.path)
+        if rd.failed:
+            print(f"FAILED: {rd.failure.get('message')}", file=sys.stderr)
+            return 1
         if rd.done:
             print(json.dumps(json.loads((rd.path / "DONE").read_text() or "{}"), indent=1))
         return 0

@@ -7,10 +7,13 @@ registered ``make`` wrapper saves it under ``build/figures`` (or ``--out``).
 from __future__ import annotations
 
 import math
+import textwrap
 from pathlib import Path
 
 import matplotlib.pyplot as plt
 import torch
+from matplotlib.lines import Line2D
+from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator
 
 from vslbook.budget import Budget, get_budget
 from vslbook.movement import DMP, ProDMP, ProMP
@@ -93,6 +96,161 @@ def draw_dime_published(tasks: list[str] | None = None, budget: Budget | None = 
     return fig
 
 
+# Figs. 5.2 and 5.3 in the thesis's layout, from the published data only. Panel titles
+# name the tasks as the thesis does (Section 5.5, Appendix C.3, Table C.1).
+#: Fig. 5.2 (a)-(b): (task id in the published data, panel title)
+FIG_5_2_PANELS: tuple[tuple[str, str], ...] = (
+    ("gym_ant_v3", "(a) Ant-v3"),
+    ("gym_humanoid_v3", "(b) Humanoid-v3"),
+)
+#: Fig. 5.3, one row per task family: (row header, ((task id, panel title), ...)).
+#: The text places dog in 5.3a-d, humanoid in e-g, object hold in h and pen twirl in k;
+#: the MyoSuite row follows Appendix C's order (object hold, reach, key turn, pen twirl),
+#: which agrees with h and k. The order inside the dog and humanoid rows is not stated.
+FIG_5_3_ROWS: tuple[tuple[str, tuple[tuple[str, str], ...]], ...] = (
+    (
+        "DMC dog (Fig. 5.3a-d)",
+        (
+            ("dmc_dog_run", "dog-run"),
+            ("dmc_dog_trot", "dog-trot"),
+            ("dmc_dog_walk", "dog-walk"),
+            ("dmc_dog_stand", "dog-stand"),
+        ),
+    ),
+    (
+        "DMC humanoid (Fig. 5.3e-g)",
+        (
+            ("dmc_humanoid_run", "humanoid-run"),
+            ("dmc_humanoid_walk", "humanoid-walk"),
+            ("dmc_humanoid_stand", "humanoid-stand"),
+        ),
+    ),
+    (
+        "MyoSuite hand, random targets, the thesis's 'hard' tasks (Fig. 5.3h-k)",
+        (
+            ("myo_hand_obj_hold_rndm", "object-hold (random)"),
+            ("myo_hand_reach_rndm", "reach (random)"),
+            ("myo_hand_key_turn_rndm", "key-turn (random)"),
+            ("myo_hand_pen_twirl_rndm", "pen-twirl (random)"),
+        ),
+    ),
+)
+_DIFFUSION_BASELINES = "QSM, Diffusion-QL, Consistency-AC, DIPO, QVPO, DACER"
+_PUBLISHED_LABEL = "DIME (published curves, 10 seeds, thesis data)"
+
+
+def _steps_label(value: float, _pos: object = None) -> str:
+    """Env steps as "0", "0.5M", "1M", "3M" (no scientific notation)."""
+    return "0" if value == 0 else f"{value / 1e6:g}M"
+
+
+def _published_panel(ax: plt.Axes, task: str, title: str, reps: int) -> None:
+    """One panel: IQM ± 95 % stratified-bootstrap CI of the 10 published seeds of ``task``."""
+    curve = iqm_curve(paper_curves(task), reps=reps)
+    line = learning_curve(ax, curve, color=method_color("thesis"), label=_PUBLISHED_LABEL)
+    line.set_gid(task)  # tests and readers find the IQM line of a panel by its task id
+    last = float(curve["env_steps"].max())
+    step = 0.5e6 if last <= 1.5e6 else 1e6
+    ax.set_xlim(0, math.ceil(last / step) * step)
+    ax.xaxis.set_major_locator(MultipleLocator(step))
+    ax.xaxis.set_major_formatter(FuncFormatter(_steps_label))
+    if last > 1.5e6:  # published to 3M steps: mark where the 1M panels end
+        ax.axvline(1e6, color="0.4", ls=":", lw=1)
+    if task.startswith("myo"):
+        ax.set_ylim(-0.03, 1.03)
+        ax.yaxis.set_major_locator(MultipleLocator(0.5))
+        ax.set_ylabel("success rate")
+    else:
+        ax.yaxis.set_major_locator(MaxNLocator(nbins=4))
+        ax.ticklabel_format(axis="y", style="plain", useOffset=False)
+        ax.set_ylabel("return")
+    ax.set(title=title, xlabel="env steps")
+
+
+def _footnote(fig: plt.Figure, text: str, width: int) -> None:
+    fig.text(0.01, 0.005, textwrap.fill(text, width), ha="left", va="bottom", fontsize=8,
+             color="0.25")
+
+
+def draw_fig_5_2_published(budget: Budget | str | None = None) -> plt.Figure:
+    """Fig. 5.2 (a) Ant-v3 and (b) Humanoid-v3 from the published DIME data.
+
+    Each panel is the IQM over the 10 published seeds with its 95 % stratified-bootstrap
+    CI (``budget.bootstrap_reps`` resamples), 1M env steps. Not drawn: CrossQ and the
+    diffusion baselines of the thesis's figure, whose curves are not in the published
+    data, and panels (c)-(d), the diffusion-steps ablation on humanoid-run (runtime and
+    learning curves), which is not published data; notebook ``05_dime`` (section 5)
+    runs that ablation at the active budget.
+    """
+    use_style()
+    bud = get_budget(budget)
+    fig, axes = plt.subplots(1, 2, figsize=(8.6, 3.5))
+    for ax, (task, title) in zip(axes, FIG_5_2_PANELS, strict=True):
+        _published_panel(ax, task, title, bud.bootstrap_reps)
+    axes[0].legend(loc="lower right", fontsize=8)
+    fig.suptitle("Fig. 5.2 (a)-(b): DIME on Gym, IQM ± 95 % stratified-bootstrap CI")
+    _footnote(
+        fig,
+        f"Published DIME curves only (10 seeds, thesis data). Not drawn: CrossQ and the "
+        f"diffusion baselines ({_DIFFUSION_BASELINES}) of the thesis's figure; their curves "
+        f"are not in the published data. Panels (c)-(d), the diffusion-steps ablation on "
+        f"humanoid-run, are not published data and are shown elsewhere (notebook 05_dime, "
+        f"ablations at the active budget).",
+        width=120,
+    )
+    fig.tight_layout(rect=(0, 0.13, 1, 1))
+    return fig
+
+
+def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
+    """Fig. 5.3: DMC dog and humanoid, MyoSuite hand tasks, from the published DIME data.
+
+    Three rows as the thesis groups them (dog: 5.3a-d, humanoid: e-g, MyoSuite: h-k; see
+    :data:`FIG_5_3_ROWS`); each panel is the IQM over the 10 published seeds with its
+    95 % stratified-bootstrap CI (``budget.bootstrap_reps`` resamples). dog-run and
+    humanoid-run are published to 3M env steps and drawn in full (a dotted line marks
+    1M, the other panels' horizon; the thesis's 3M humanoid-run comparison is Fig. 5.8c).
+    Not drawn: BRO, BRO (Fast), CrossQ and the diffusion baselines of the thesis's
+    figure, whose curves are not in the published data.
+    """
+    use_style()
+    bud = get_budget(budget)
+    cols = max(len(panels) for _, panels in FIG_5_3_ROWS)
+    rows = len(FIG_5_3_ROWS)
+    fig, axes = plt.subplots(rows, cols, figsize=(3.25 * cols, 2.75 * rows + 0.9),
+                             squeeze=False)
+    for row, (header, panels) in zip(axes, FIG_5_3_ROWS, strict=True):
+        for ax, (task, title) in zip(row, panels, strict=False):
+            _published_panel(ax, task, title, bud.bootstrap_reps)
+        label = row[0].annotate(header, xy=(0, 1), xycoords="axes fraction",
+                                xytext=(-42, 22), textcoords="offset points", ha="left",
+                                va="bottom", fontsize=11, fontweight="bold")
+        label.set_in_layout(False)  # tight_layout leaves room for it through h_pad
+    fig.suptitle("Fig. 5.3: DIME on DMC dog / humanoid and MyoSuite, "
+                 "IQM ± 95 % stratified-bootstrap CI")
+    _footnote(
+        fig,
+        f"Published DIME curves only (10 seeds, thesis data). Not drawn: BRO, BRO (Fast), "
+        f"CrossQ and the diffusion baselines ({_DIFFUSION_BASELINES}) of the thesis's "
+        f"figure; their curves are not in the published data. dog-run and humanoid-run are "
+        f"published to 3M env steps and drawn in full (dotted line: 1M, the other panels' "
+        f"horizon).",
+        width=190,
+    )
+    fig.tight_layout(rect=(0, 0.04, 1, 0.965), h_pad=2.6)
+    spare = [
+        ax for row, (_, panels) in zip(axes, FIG_5_3_ROWS, strict=True) for ax in row[len(panels) :]
+    ]
+    if spare:  # the legend goes where the humanoid row has no fourth panel
+        box = spare[0].get_position()
+        marker = Line2D([], [], color="0.4", ls=":", lw=1, label="1M steps (3M panels)")
+        fig.legend(handles=[axes[0, 0].get_lines()[0], marker], loc="center",
+                   bbox_to_anchor=(box.x0, box.y0, box.width, box.height), fontsize=9)
+    for ax in spare:
+        ax.remove()
+    return fig
+
+
 def _saver(fig_id: str, draw):
     def make(budget: Budget | None = None, out_dir: str | Path | None = None) -> list[Path]:
         fig = draw(budget=budget)
@@ -112,4 +270,14 @@ register_figure(
     "dime-published",
     _saver("dime-published", lambda budget=None: draw_dime_published(budget=budget)),
     doc="Ch. 5 data: published 10-seed DIME curves of 21 tasks, IQM with 95 % CIs",
+)
+register_figure(
+    "fig5-2-published",
+    _saver("fig5-2-published", lambda budget=None: draw_fig_5_2_published(budget=budget)),
+    doc="Fig. 5.2 (a)-(b): Ant-v3, Humanoid-v3 from the published DIME curves (IQM, 95 % CI)",
+)
+register_figure(
+    "fig5-3-published",
+    _saver("fig5-3-published", lambda budget=None: draw_fig_5_3_published(budget=budget)),
+    doc="Fig. 5.3: dog, humanoid, MyoSuite (11 panels) from the published DIME curves",
 )

@@ -98,6 +98,31 @@ def get_algorithm(name: str) -> Algorithm:
     return ALGORITHMS[name]
 
 
+def check_seed(seed: Any) -> int:
+    """``seed`` as an int; a negative or non-integer seed (-1, 2.5, "x", True) is a clear error."""
+    import numbers
+
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if seed < 0:
+        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    return int(seed)
+
+
+def check_run_request(spec: Algorithm, env: str, seed: Any) -> None:
+    """Validate a run's env id and seed before anything is written to disk.
+
+    Raises:
+        ValueError: for an env id neither vslbook nor gymnasium knows (with close matches),
+            one the algorithm is not meant for, or a seed that is not an integer >= 0.
+    """
+    from vslbook.envs import check_env_id
+
+    check_env_id(env)
+    spec.check_env(env)
+    check_seed(seed)
+
+
 def get_figure(fig_id: str) -> Figure:
     load_plugins()
     if fig_id not in FIGURES:
@@ -122,7 +147,18 @@ def _convert(config_cls: type, field: Any, value: str) -> Any:
         return value.lower() in ("true", "1")
     if default is None:
         return value
+    if isinstance(default, int):
+        try:
+            return int(value)
+        except ValueError:
+            raise ValueError(f"{field.name}={value}: expected an integer") from None
     return type(default)(value)
+
+
+def _is_int(value: Any) -> bool:
+    import numbers
+
+    return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
 def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) -> Any:
@@ -144,12 +180,16 @@ def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) ->
             raise ValueError(
                 f"{config_cls.__name__} has no field {key!r}; expected one of {', '.join(fields)}"
             )
-        if isinstance(value, str) and str(fields[key].type) != "str":
+        kind = str(fields[key].type)
+        if isinstance(value, str) and kind != "str":
             try:
                 value = _convert(config_cls, fields[key], value)
             except (TypeError, ValueError) as err:
-                kind = str(fields[key].type)
+                if "expected an integer" in str(err):
+                    raise ValueError(f"{err} (config field {key}: {kind})") from None
                 raise ValueError(f"cannot convert {key}={value!r} to {kind}") from err
+        elif kind in ("int", "int | None") and value is not None and not _is_int(value):
+            raise ValueError(f"{key}={value!r}: expected an integer (config field {key}: {kind})")
         kwargs[key] = value
     return config_cls(**kwargs)
 

@@ -8,6 +8,12 @@ A *run directory* holds everything one training run leaves behind::
         metrics.jsonl     one JSON object per ``log`` call, appended, flushed and fsync'ed
         checkpoint/       state.pt, written to state.pt.tmp first and then renamed
         DONE              written last, a JSON summary; its presence marks the run complete
+        FAILED            written instead of DONE when a run diverged: step and quantity
+
+Code identity: ``env.json`` records :func:`code_fingerprint` (sha256 of the package's
+Python sources) beside the git sha and a dirty flag. :attr:`RunDir.code_matches` compares
+it with the running code, so a finished run is reused only by the code that produced it
+(:func:`vslbook.training.run`).
 
 Resuming: :meth:`RunDir.save_checkpoint` records how many lines ``metrics.jsonl`` had at
 that moment and :meth:`RunDir.load_checkpoint` truncates the file back to that count, so
@@ -23,6 +29,7 @@ next to a ``registry.json`` that records its sha256, row count and a description
 
 from __future__ import annotations
 
+import functools
 import gzip
 import hashlib
 import io
@@ -48,6 +55,7 @@ import pandas as pd
 
 __all__ = [
     "DataIntegrityError",
+    "DivergenceError",
     "RunDir",
     "collect_runs",
     "config_hash",
@@ -55,6 +63,7 @@ __all__ = [
     "load_table",
     "paper_curves",
     "paper_tasks",
+    "code_fingerprint",
     "register_file",
     "restore_rng_state",
     "results_dir",
@@ -80,6 +89,21 @@ _NAME_OK = re.compile(r"[^A-Za-z0-9._-]+")
 
 class DataIntegrityError(ValueError):
     """A data file does not match its entry in ``registry.json`` (or has none)."""
+
+
+class DivergenceError(RuntimeError):
+    """A training run produced a non-finite loss, value or parameter.
+
+    Attributes:
+        step: the environment step (or iteration) at which it was detected.
+        quantity: what was non-finite, e.g. ``"critic_loss"`` or ``"parameter policy.x"``.
+        value: the offending value as a float (nan or ±inf) where there is one.
+    """
+
+    def __init__(self, step: int, quantity: str, value: float | None = None) -> None:
+        self.step, self.quantity, self.value = int(step), str(quantity), value
+        shown = "" if value is None else f" ({value})"
+        super().__init__(f"diverged at step {self.step}: non-finite {self.quantity}{shown}")
 
 
 # --------------------------------------------------------------------------- paths
@@ -195,6 +219,34 @@ def _git_sha() -> str | None:
     return sha if out.returncode == 0 and re.fullmatch(r"[0-9a-f]{40}", sha) else None
 
 
+def _git_dirty() -> bool | None:
+    """True when the work tree has uncommitted changes (None outside a git checkout)."""
+    try:
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=_REPO_ROOT, capture_output=True, text=True, timeout=5, check=False,
+        )  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return bool(out.stdout.strip()) if out.returncode == 0 else None
+
+
+@functools.lru_cache(maxsize=1)
+def code_fingerprint() -> str:
+    """sha256 over the package's Python sources (relative path and bytes of each file).
+
+    It names the code that produced a run independently of git: an uncommitted edit
+    changes it, a commit that touches only notebooks or docs does not. Computed once per
+    process, so it names the code this process loaded, even if files change on disk later.
+    """
+    package = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        digest.update(path.relative_to(package).as_posix().encode("utf-8") + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
 def _environment() -> dict[str, Any]:
     """What ``env.json`` records: where and with what a run was started."""
     versions: dict[str, str | None] = {}
@@ -209,6 +261,8 @@ def _environment() -> dict[str, Any]:
         "hostname": socket.gethostname(),
         "packages": versions,
         "git_sha": _git_sha(),
+        "git_dirty": _git_dirty(),
+        "code_hash": code_fingerprint(),
         "timestamp": datetime.now(UTC).isoformat(timespec="seconds"),
     }
 
@@ -249,6 +303,7 @@ class RunDir:
     CHECKPOINT_DIR = "checkpoint"
     CHECKPOINT = "state.pt"
     DONE = "DONE"
+    FAILED = "FAILED"
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
@@ -465,13 +520,58 @@ class RunDir:
     # -- completion ---------------------------------------------------------------------
 
     def mark_done(self, summary: Mapping[str, Any] | None = None) -> None:
-        """Write ``DONE`` (a JSON summary); call it as the run's very last step."""
+        """Write ``DONE`` (a JSON summary); call it as the run's very last step.
+
+        Raises:
+            RuntimeError: the run is marked FAILED (a diverged run is never DONE).
+        """
+        if self.failed:
+            raise RuntimeError(f"{self.path} is marked FAILED ({self.failure}); it cannot be DONE")
         _atomic_write(self.path / self.DONE, _json_bytes(_plain(dict(summary or {}), "summary")))
 
     @property
     def done(self) -> bool:
         """True once :meth:`mark_done` has been called."""
         return (self.path / self.DONE).is_file()
+
+    def mark_failed(self, error: DivergenceError | Mapping[str, Any]) -> None:
+        """Write ``FAILED`` (JSON: step, quantity, value, message) for a diverged run."""
+        if isinstance(error, DivergenceError):
+            info = {"step": error.step, "quantity": error.quantity, "message": str(error),
+                    "value": None if error.value is None else repr(error.value)}  # fmt: skip
+        else:
+            info = dict(error)
+        _atomic_write(self.path / self.FAILED, _json_bytes(_plain(info, "failure")))
+
+    @property
+    def failed(self) -> bool:
+        """True when the run diverged and was marked FAILED."""
+        return (self.path / self.FAILED).is_file()
+
+    @property
+    def failure(self) -> dict[str, Any] | None:
+        """The FAILED record (step, quantity, value, message), or None."""
+        if not self.failed:
+            return None
+        return json.loads((self.path / self.FAILED).read_text(encoding="utf-8"))
+
+    @property
+    def status(self) -> str:
+        """``"done"``, ``"failed"`` or ``"incomplete"``."""
+        return "failed" if self.failed else "done" if self.done else "incomplete"
+
+    @property
+    def code_hash(self) -> str | None:
+        """The :func:`code_fingerprint` recorded when the run was created (None if older)."""
+        try:
+            return self.env.get("code_hash")
+        except FileNotFoundError:
+            return None
+
+    @property
+    def code_matches(self) -> bool:
+        """True when the run was created by the code that is running now."""
+        return self.code_hash == code_fingerprint()
 
 
 # --------------------------------------------------------------------------- RNG state
@@ -663,7 +763,7 @@ def collect_runs(
     """Write ``runs.csv``, ``evals.csv.gz`` and ``registry.json`` into ``out_dir``.
 
     ``runs.csv`` has one row per run (columns run, algo, env, seed, budget, config_hash,
-    status with status ``done`` or ``incomplete``), sorted by run name; ``evals.csv.gz``
+    status ``done``, ``failed`` or ``incomplete``), sorted by run name; ``evals.csv.gz``
     has one row per (run, step, metric) for every numeric metric in ``metrics.jsonl``
     (``null`` values, i.e. non-finite ones, become empty cells / NaN). The output is
     byte-for-byte deterministic for the same runs.
@@ -692,7 +792,7 @@ def collect_runs(
                 "seed": config.get("seed"),
                 "budget": config.get("budget"),
                 "config_hash": config_hash(config),
-                "status": "done" if run.done else "incomplete",
+                "status": run.status,
             }
         )
         for row in run.metrics():
@@ -709,7 +809,7 @@ def collect_runs(
     _atomic_write(written["runs.csv"], _csv_bytes(runs_frame))
     _atomic_write(written["evals.csv.gz"], _gzip_bytes(_csv_bytes(evals_frame)))
     register_file(written["runs.csv"], "one row per run: run, algo, env, seed, budget, "
-                  "config_hash, status (done | incomplete); written by vslbook.results")
+                  "config_hash, status (done | failed | incomplete); written by vslbook.results")
     register_file(written["evals.csv.gz"], "long-format evaluations: run, step, metric, "
                   "value; from each run's metrics.jsonl; written by vslbook.results")
     written[REGISTRY] = out / REGISTRY

@@ -243,6 +243,9 @@ def iqm_curve(
     points of the group, so the band is the bootstrap distribution of whole curves;
     ``lo``/``hi`` are its percentiles (``percentile`` method, as rliable's default).
     Points where only some runs were evaluated are bootstrapped over the runs present.
+    Runs with non-finite ``y`` values (a diverged run logs ``null``, read as NaN) are not
+    dropped silently: a warning names them and how many points of theirs were unusable,
+    and the returned frame's ``attrs["unused_runs"]`` maps each such run to that count.
 
     Args:
         df: long-format frame with columns ``x``, ``y``, ``run`` (and ``group``).
@@ -266,15 +269,28 @@ def iqm_curve(
     reps = _reps(reps)
     confidence = _check_confidence(confidence)
     seed = _check_seed(seed)
+    bad = df[~np.isfinite(pd.to_numeric(df[y], errors="coerce").to_numpy(dtype=float))]
+    unused = {str(k): int(v) for k, v in bad.groupby(run).size().items()}
+    if unused:
+        listed = ", ".join(f"{k} ({v} point{'s' if v > 1 else ''})" for k, v in unused.items())
+        warnings.warn(
+            f"iqm_curve: {len(unused)} run(s) have non-finite {y!r} values that could not be "
+            f"used: {listed}",
+            stacklevel=2,
+        )
     if group is None:
-        return _curve_one_group(df, x, y, run, reps, confidence, _group_seed(seed, None))
+        out = _curve_one_group(df, x, y, run, reps, confidence, _group_seed(seed, None))
+        out.attrs["unused_runs"] = unused
+        return out
     parts = []
     for key, frame in df.groupby(group, sort=True):
         curve = _curve_one_group(frame, x, y, run, reps, confidence, _group_seed(seed, key))
         curve.insert(0, group, key)
         parts.append(curve)
     columns = [group, x, "iqm", "lo", "hi", "n_runs"]
-    return pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
+    out = pd.concat(parts, ignore_index=True) if parts else pd.DataFrame(columns=columns)
+    out.attrs["unused_runs"] = unused
+    return out
 
 
 # --------------------------------------------------------------------------- profiles

@@ -38,7 +38,12 @@ import submitit
 import yaml
 
 from vslbook.budget import get_budget
-from vslbook.registry import config_from_overrides, get_algorithm
+from vslbook.registry import (
+    check_run_request,
+    check_seed,
+    config_from_overrides,
+    get_algorithm,
+)
 from vslbook.training import run
 
 EXECUTORS = ("debug", "local", "slurm")
@@ -101,9 +106,11 @@ def sweep(
     points = expand_grid(grid)
     for point in points:  # fail before submitting anything
         config_from_overrides(spec.config, point)
-    for env in envs:
-        spec.check_env(env)
+    envs = [envs] if isinstance(envs, str) else list(envs)
     seed_list = list(range(bud.seeds) if seeds is None else seeds)
+    for env in envs:  # env ids and seeds too: a bad one is an error here, not in a job
+        check_run_request(spec, env, 0)
+    seed_list = [check_seed(s) for s in seed_list]
     jobs_args = [
         (algo, env, int(s), bud.name, str(Path(root).resolve()), point)
         for env in envs

@@ -4,17 +4,35 @@
 The run directory's name is derived from (algo, env, seed, budget, config); calling
 ``run`` again with the same arguments resumes an interrupted run from its checkpoint,
 or returns immediately if the run is DONE.
+
+Two guards:
+
+* **Stale runs.** A run directory is reused (finished) or resumed (interrupted) only when
+  it was made by the same code: ``env.json``'s code hash (:func:`vslbook.results.code_fingerprint`)
+  must equal the running package's. Otherwise the old directory is moved to
+  ``<root>/_stale/`` and the run starts afresh; with ``reuse_stale=True`` (or
+  ``$VSLBOOK_REUSE_STALE=1``, or ``vslbook run --reuse-stale``) it is used anyway, with a
+  printed warning.
+* **Divergence.** A training loop raises :class:`vslbook.results.DivergenceError` on a
+  non-finite loss, value or parameter; the run is then marked FAILED (step and quantity in
+  ``FAILED``), never DONE, and is not re-run by later calls with the same code.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import os
+import shutil
+import time
+import warnings
 from pathlib import Path
 from typing import Any
 
 from vslbook.budget import Budget, get_budget
-from vslbook.registry import config_from_overrides, get_algorithm
-from vslbook.results import RunDir
+from vslbook.registry import check_run_request, config_from_overrides, get_algorithm
+from vslbook.results import DivergenceError, RunDir, code_fingerprint
+
+REUSE_STALE_ENV = "VSLBOOK_REUSE_STALE"
 
 
 def run(
@@ -27,6 +45,7 @@ def run(
     overrides: dict[str, Any] | None = None,
     progress: bool = True,
     stop_after: int | None = None,
+    reuse_stale: bool | None = None,
 ) -> RunDir:
     """Train ``algo`` on ``env`` with ``seed`` at ``budget`` and return its run directory.
 
@@ -34,9 +53,15 @@ def run(
         overrides: hyper-parameters that differ from the algorithm's config defaults.
         stop_after: stop (without marking DONE) after this many iterations of *this call*;
             used to test that an interrupted run resumes exactly.
+        reuse_stale: use an existing run directory made by other code (see the module
+            docstring); None reads ``$VSLBOOK_REUSE_STALE`` (``1``/``true`` to allow).
+
+    Returns:
+        The run directory; check ``rd.status`` (``done``, ``failed`` or, after
+        ``stop_after``, ``incomplete``).
     """
     spec = get_algorithm(algo)
-    spec.check_env(env)
+    check_run_request(spec, env, seed)  # env id, algorithm support, seed: before any directory
     bud = get_budget(budget)
     config = config_from_overrides(spec.config, overrides)
     record = {
@@ -47,9 +72,42 @@ def run(
         **dataclasses.asdict(config),
     }
     rd = RunDir.create(root, record)
+    if not rd.code_matches:  # only an existing directory can have been made by other code
+        rd = _stale(rd, root, record, reuse_stale)
+    if rd.failed:
+        warnings.warn(
+            f"run {rd.name} diverged before ({rd.failure.get('message')}); not re-run. "
+            f"Delete {rd.path} to try again.",
+            stacklevel=2,
+        )
+        return rd
     if rd.done:
         return rd
-    summary = spec.train(rd, record, bud, progress=progress, stop_after=stop_after)
+    try:
+        summary = spec.train(rd, record, bud, progress=progress, stop_after=stop_after)
+    except DivergenceError as err:
+        rd.mark_failed(err)
+        warnings.warn(f"run {rd.name} {err}; marked FAILED in {rd.path}", stacklevel=2)
+        return rd
     if summary is not None:
         rd.mark_done(summary)
     return rd
+
+
+def _reuse_from_env() -> bool:
+    return os.environ.get(REUSE_STALE_ENV, "").strip().lower() in ("1", "true", "yes")
+
+
+def _stale(rd: RunDir, root: str | Path, record: dict, reuse_stale: bool | None) -> RunDir:
+    """Handle a run directory made by other code: reuse it (warning) or move it aside."""
+    old = (rd.code_hash or "unknown")[:12]
+    new = code_fingerprint()[:12]
+    what = f"run {rd.name} ({rd.status}) was made by other code (code hash {old}, now {new})"
+    if reuse_stale if reuse_stale is not None else _reuse_from_env():
+        print(f"WARNING: {what}; reusing it because reuse_stale / ${REUSE_STALE_ENV} is set")
+        return rd
+    target = Path(root) / "_stale" / f"{rd.name}-{old}-{int(time.time())}"
+    target.parent.mkdir(parents=True, exist_ok=True)
+    shutil.move(str(rd.path), str(target))
+    print(f"{what}; moved to {target} and starting afresh")
+    return RunDir.create(root, record)

@@ -9,6 +9,7 @@ They also expose ``evaluate(theta, context)`` for batched evaluation and
 
 from __future__ import annotations
 
+import difflib
 from typing import Any
 
 import gymnasium as gym
@@ -26,11 +27,24 @@ for _id, _entry in VSLBOOK_ENVS.items():
         gym.register(id=_id, entry_point=_entry)
 
 
+def check_env_id(env_id: str) -> None:
+    """Raise a clear ValueError unless :func:`make` knows ``env_id``; builds no simulator.
+
+    Known are the step-based tasks (:data:`STEP_TASKS`: dm_control, gymnasium MuJoCo,
+    MyoSuite and the point mass) and every id in gymnasium's registry. The message names
+    the id, suggests close matches and lists the ids vslbook provides.
+    """
+    if isinstance(env_id, str) and (env_id in STEP_TASKS or env_id in gym.registry):
+        return
+    known = sorted({k for k in gym.registry if k.startswith("vslbook/")} | set(STEP_TASKS))
+    close = difflib.get_close_matches(str(env_id), sorted(set(gym.registry) | set(known)), n=3)
+    hint = f"did you mean {', '.join(close)}? " if close else ""
+    raise ValueError(f"unknown environment {env_id!r}; {hint}vslbook provides {', '.join(known)}")
+
+
 def make(env_id: str, **kwargs: Any) -> gym.Env:
     """Create a registered environment; an unknown id is a clear error listing the known ones."""
     if env_id in STEP_TASKS:
         return make_step_env(env_id, **kwargs)
-    if env_id not in gym.registry:
-        known = sorted({k for k in gym.registry if k.startswith("vslbook/")} | set(STEP_TASKS))
-        raise ValueError(f"unknown environment {env_id!r}; vslbook provides {', '.join(known)}")
+    check_env_id(env_id)
     return gym.make(env_id, **kwargs)

@@ -1,35 +1,30 @@
 """Live DIME runs for the Chapter 5 notebook: variants x seeds -> one long evals table.
 
-The thesis's networks (a 2048-wide critic, 16 diffusion steps) make about three critic
-updates per second on a 2-core CPU, so the notebook's *live* runs use a smaller network,
-chosen per budget by :func:`live_network` and printed next to every curve; the ``full``
-budget uses the thesis's sizes. Counts (steps, evaluation interval) are full-budget values
-that the budget scales, as everywhere in vslbook. Runs go through :func:`vslbook.training.run`,
-so finished runs are reused and interrupted ones resume.
+A budget only scales counts (steps, evaluation interval, seeds). The network is *not* the
+budget's business: the thesis's networks (a 2048-wide critic, 16 diffusion steps) make about
+three critic updates per second on a 2-core CPU, so a notebook picks a named configuration
+(:data:`vslbook.srl.dime_config.NAMED_CONFIGS`, e.g. ``"cpu-256"``) in plain sight and passes
+it as ``common``; :meth:`VariantRuns.caption` then says, generated from each variant's
+config, how it differs from the thesis's table and how many seeds it has. Runs go through
+:func:`vslbook.training.run`, so finished runs are reused (when the code is the same),
+interrupted ones resume, and diverged ones are marked FAILED and reported, not dropped.
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
 from vslbook.budget import Budget, get_budget
+from vslbook.registry import get_algorithm
 from vslbook.results import RunDir, collect_runs, load_table
+from vslbook.srl.dime_config import describe_differences
 from vslbook.training import run
-
-
-def live_network(budget: Budget | str | None = None) -> dict[str, Any]:
-    """Network sizes for live runs: small on CPU budgets, the thesis's at ``full``."""
-    bud = get_budget(budget)
-    return bud.pick(
-        smoke=dict(critic_hidden=64, actor_hidden=64, n_diffusion_steps=4, num_threads=2),
-        reduced=dict(critic_hidden=256, actor_hidden=256, n_diffusion_steps=4),
-        full={},
-    )
 
 
 @dataclass
@@ -40,18 +35,66 @@ class VariantRuns:
         evals: the long metrics table of every run (``run, step, metric, value, ...``) with
             an extra ``variant`` column holding the label.
         runs: the run directories of each label, one per seed in seed order.
+        overrides: the config overrides of each label (named configuration, common and the
+            variant's own), from which the captions are generated.
     """
 
     evals: pd.DataFrame
     runs: dict[str, list[RunDir]]
+    overrides: dict[str, tuple[str, dict[str, Any]]] = field(default_factory=dict)
+
+    @property
+    def unusable(self) -> dict[str, str]:
+        """``{run name: status or failure}`` for every run that is not DONE."""
+        out = {}
+        for rds in self.runs.values():
+            for rd in rds:
+                if rd.failed:
+                    out[rd.name] = f"FAILED: {rd.failure.get('message')}"
+                elif not rd.done:
+                    out[rd.name] = rd.status
+        return out
 
     def curve_rows(self, metric: str = "eval_return") -> pd.DataFrame:
-        """Rows of one metric, ready for :func:`vslbook.stats.iqm_curve` (x ``step``)."""
+        """Rows of one metric from the finished runs, ready for :func:`vslbook.stats.iqm_curve`.
+
+        Runs that are not DONE (diverged or incomplete) are left out *with a warning that
+        names them*; :attr:`unusable` lists them too.
+        """
         rows = self.evals[self.evals.metric == metric]
         if rows.empty:
             known = ", ".join(sorted(self.evals.metric.unique()))
             raise ValueError(f"no metric {metric!r} in these runs; they logged: {known}")
+        bad = self.unusable
+        if bad:
+            listed = "; ".join(f"{name} ({why})" for name, why in bad.items())
+            warnings.warn(
+                f"{len(bad)} run(s) could not be used for {metric!r}: {listed}", stacklevel=2
+            )
+            rows = rows[~rows.run.isin(bad)]
         return rows
+
+    def seeds(self, label: str) -> int:
+        """How many finished (DONE) runs the variant ``label`` has."""
+        return sum(rd.done for rd in self.runs[label])
+
+    def caption(self, label: str) -> str:
+        """``"<label>: <n> seed(s), <differences from the thesis's table>"`` from the config."""
+        algo, overrides = self.overrides[label]
+        spec = get_algorithm(algo)
+        seeds = self.seeds(label)
+        return (
+            f"{label} ({algo}): {seeds} seed{'s' if seeds != 1 else ''}, "
+            f"{describe_differences(overrides, spec.config)}"
+        )
+
+    def captions(self) -> str:
+        """One caption line per variant, plus the runs that could not be used, if any."""
+        lines = [self.caption(label) for label in self.runs]
+        bad = self.unusable
+        if bad:
+            lines.append(f"not used ({len(bad)}): " + ", ".join(bad))
+        return "\n".join(lines)
 
 
 def run_variants(
@@ -64,32 +107,39 @@ def run_variants(
     tables: str | Path,
     common: Mapping[str, Any] | None = None,
     progress: bool = True,
+    reuse_stale: bool | None = None,
 ) -> VariantRuns:
-    """Train every ``{label: (algo, overrides)}`` for ``seeds`` seeds.
+    """Train every ``{label: (algo, overrides)}`` for ``seeds`` seeds (0 .. seeds-1).
 
-    Overrides are applied over :func:`live_network` and ``common``. The metrics are written
-    by :func:`vslbook.results.collect_runs` to ``tables`` and read back through its sha256
-    check, so the returned table is exactly what a later analysis would load. Finished runs
-    are reused and interrupted ones resume (:func:`vslbook.training.run`); ``progress``
-    shows a bar per run.
+    ``common`` (e.g. a named configuration plus run lengths) is applied first, then each
+    variant's overrides. The metrics are written by :func:`vslbook.results.collect_runs` to
+    ``tables`` and read back through its sha256 check, so the returned table is exactly what
+    a later analysis would load. Finished runs made by the same code are reused, interrupted
+    ones resume, stale ones are re-run unless ``reuse_stale`` (see
+    :func:`vslbook.training.run`); ``progress`` shows a bar per run.
     """
-    if seeds < 1:
-        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
+        raise ValueError(f"seeds must be an integer >= 1, got {seeds!r}")
     bud = get_budget(budget)
     if not variants:
         raise ValueError("variants is empty; expected {label: (algo, overrides)}")
     labels: dict[str, str] = {}
     by_label: dict[str, list[RunDir]] = {}
+    used: dict[str, tuple[str, dict[str, Any]]] = {}
     for label, (algo, overrides) in variants.items():
+        over = {**(common or {}), **overrides}
+        used[label] = (algo, over)
         for seed in range(seeds):
-            over = {**live_network(bud), **(common or {}), **overrides}
-            rd = run(algo, env, seed, bud, root=root, overrides=over, progress=progress)
+            rd = run(
+                algo, env, seed, bud, root=root, overrides=over, progress=progress,
+                reuse_stale=reuse_stale,
+            )  # fmt: skip
             labels[rd.name] = label
             by_label.setdefault(label, []).append(rd)
     collect_runs([rd for rds in by_label.values() for rd in rds], tables)
     evals = load_table("evals.csv.gz", tables)
     evals["variant"] = evals["run"].map(labels)
-    return VariantRuns(evals, by_label)
+    return VariantRuns(evals, by_label, used)
 
 
 def load_agent(run_dir: RunDir):
@@ -99,7 +149,7 @@ def load_agent(run_dir: RunDir):
     environment of the run's task.
     """
     from vslbook.envs import make
-    from vslbook.registry import config_from_record, get_algorithm
+    from vslbook.registry import config_from_record
     from vslbook.srl.dime import default_value_range, make_agent
 
     config = run_dir.config

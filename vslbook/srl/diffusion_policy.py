@@ -146,8 +146,11 @@ class DiffusionPolicyConfig:
 
     def __post_init__(self) -> None:
         for name in ("n_steps", "n_frequencies", "hidden", "n_layers"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be >= 1, got {getattr(self, name)}")
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int):
+                raise ValueError(f"{name} must be an integer, got {value!r}")
+            if value < 1:
+                raise ValueError(f"{name} must be >= 1, got {value}")
         for name in ("sigma0", "dt", "sigma_init", "out_clip"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
@@ -257,6 +260,11 @@ class DiffusionPolicy(nn.Module):
         ``deterministic=True`` starts at x_N = 0 and sets every ε_n = 0 (the noise-free path);
         its costs are then not an entropy estimate. ``generator`` seeds the noise.
         """
+        if obs.ndim != 2 or obs.shape[1] != self.obs_dim:  # shapes only: no host sync
+            raise ValueError(
+                f"obs must have shape (batch, obs_dim) = (batch, {self.obs_dim}), "
+                f"got {tuple(obs.shape)}"
+            )
         c, batch = self.config, obs.shape[0]
 
         def noise() -> Tensor:

@@ -21,6 +21,11 @@ environment from (run seed, evaluation index, episode), so no simulator state is
 checkpoints are written at episode boundaries only, and a run resumed from one logs exactly
 the numbers an uninterrupted run logs on CPU (all metrics except the wall-clock rates
 ``critic_updates_per_s`` and ``env_steps_per_s``).
+
+Divergence. Every update's losses, the critic's mean Q and the entropy bound are checked
+for finiteness (one host sync per update), the parameters and log α at every evaluation;
+the first non-finite one raises :class:`vslbook.results.DivergenceError` naming the step and
+the quantity, and :func:`vslbook.training.run` marks the run FAILED instead of DONE.
 """
 
 from __future__ import annotations
@@ -38,7 +43,7 @@ from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.registry import config_from_record, register_algorithm
-from vslbook.results import RunDir, restore_rng_state, rng_state
+from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
 from vslbook.srl.dime_config import CrossQConfig, DIMEConfig, DIMEGaussianConfig
 from vslbook.srl.dime_updates import (
@@ -222,6 +227,25 @@ class _Means:
         self.counts = dict(state["counts"])
 
 
+def _require_finite(step: int, **values: Tensor) -> None:
+    """Raise :class:`DivergenceError` naming the first non-finite value (one host sync)."""
+    stacked = torch.stack([v.detach().reshape(()).float() for v in values.values()])
+    if not bool(torch.isfinite(stacked).all()):
+        for name, value in values.items():
+            if not bool(torch.isfinite(value).all()):
+                raise DivergenceError(step, name, float(value.detach().reshape(())))
+
+
+def _require_finite_parameters(step: int, agent: Agent) -> None:
+    """Raise :class:`DivergenceError` if any network parameter or log α is not finite."""
+    named = [("log_alpha", agent.log_alpha)]
+    for prefix, module in (("policy", agent.policy), ("critic", agent.critic)):
+        named += [(f"{prefix}.{n}", p) for n, p in module.named_parameters()]
+    for name, p in named:
+        if not bool(torch.isfinite(p).all()):
+            raise DivergenceError(step, f"parameter {name}")
+
+
 def _scaled(budget: Budget, full: int) -> int:
     """``budget``'s share of a full-budget count, at least ``min(full, 1000)``."""
     return budget.scale(full, minimum=min(full, 1000))
@@ -329,17 +353,23 @@ def train(
             for _ in range(cfg.utd):  # l. 7: UTD critic updates per environment step
                 batch = buffer.sample(cfg.batch_size, rng)
                 critic_stats = critic_step(agent, batch)
+                _require_finite(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
                 diag.add("critic_loss", critic_stats.loss)
                 diag.add("q_mean", critic_stats.value)
                 n_updates += 1
                 if n_updates % cfg.policy_delay == 0:  # l. 8-10: actor (5.27) and α (5.28)
                     actor_stats = actor_step(agent, batch.obs)
-                    alpha_update(agent, actor_stats.running_cost)
+                    alpha_loss = alpha_update(agent, actor_stats.running_cost)
+                    _require_finite(
+                        step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
+                        alpha_loss=alpha_loss,
+                    )  # fmt: skip
                     diag.add("actor_loss", actor_stats.loss)
                     diag.add("entropy_bound", actor_stats.value)
                     diag.add("running_cost", actor_stats.running_cost.mean())
 
         if step % eval_every == 0 or step == total_steps:
+            _require_finite_parameters(step, agent)
             eval_return, eval_success = evaluate(
                 agent.policy, eval_env, seed=seed, index=n_evals, episodes=eval_episodes,
                 device=device,
@@ -351,6 +381,9 @@ def train(
             if eval_success is not None:
                 row["eval_success"] = eval_success
             row.update(diag.pop())
+            if hasattr(agent.policy, "noise_var"):  # Fig. C.2: the learned β_k = σ_k² per dim
+                betas = agent.policy.noise_var.detach().cpu().tolist()
+                row.update({f"beta_{k}": value for k, value in enumerate(betas)})
             row.update(
                 alpha=float(agent.alpha.item()),
                 critic_updates=n_updates,

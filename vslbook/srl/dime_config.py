@@ -148,8 +148,8 @@ class DIMEConfig:
             raise ValueError(f"fixed_alpha must be > 0 or None, got {self.fixed_alpha!r}")
         if not 0.0 < self.tau <= 1.0:
             raise ValueError(f"tau must be in (0, 1], got {self.tau!r}")
-        if self.n_atoms < 2:
-            raise ValueError(f"n_atoms must be >= 2, got {self.n_atoms!r}")
+        if isinstance(self.n_atoms, bool) or not isinstance(self.n_atoms, int) or self.n_atoms < 2:
+            raise ValueError(f"n_atoms must be an integer >= 2, got {self.n_atoms!r}")
         for name, value, allowed in (
             ("policy", self.policy, POLICIES),
             ("critic", self.critic, CRITICS),
@@ -175,11 +175,28 @@ class DIMEConfig:
             )
         if self.device != "auto":
             try:
-                torch.device(self.device)
-            except RuntimeError as err:
+                device = torch.device(self.device)
+            except (RuntimeError, TypeError) as err:
                 raise ValueError(
                     f"unknown device {self.device!r}; expected 'auto', 'cpu', 'cuda', ..."
                 ) from err
+            if device.type == "cuda":
+                _check_cuda(self.device, device.index)
+
+
+def _check_cuda(name: str, index: int | None) -> None:
+    """A clear error for a CUDA device this machine does not have."""
+    if not torch.cuda.is_available():
+        raise ValueError(
+            f"device {name!r} requested but CUDA is not available on this machine "
+            "(torch.cuda.is_available() is False); use device='auto' or 'cpu'"
+        )
+    count = torch.cuda.device_count()
+    if index is not None and index >= count:
+        raise ValueError(
+            f"device {name!r} requested but this machine has {count} CUDA device(s) "
+            f"(cuda:0 to cuda:{count - 1}); use device='auto', 'cuda' or 'cpu'"
+        )
 
 
 @dataclass(frozen=True)

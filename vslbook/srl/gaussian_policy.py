@@ -68,6 +68,12 @@ class GaussianPolicy(nn.Module):
         generator: torch.Generator | None = None,
     ) -> PolicySample:
         """Reparameterised a = tanh(μ + σ ε); ``deterministic`` uses ε = 0 (a = tanh μ)."""
+        obs_dim = self.trunk[0].in_features
+        if obs.ndim != 2 or obs.shape[1] != obs_dim:  # shapes only: no host sync
+            raise ValueError(
+                f"obs must have shape (batch, obs_dim) = (batch, {obs_dim}), "
+                f"got {tuple(obs.shape)}"
+            )
         mean, log_std = self.distribution(obs)
         if deterministic:
             eps = torch.zeros_like(mean)

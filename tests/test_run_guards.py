@@ -1,0 +1,158 @@
+"""Guards around training runs: divergence ends a run FAILED (never DONE) and statistics name
+the runs they could not use; a finished run is reused only by the code that produced it."""
+
+import json
+import warnings
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+
+import vslbook.srl.dime as dime_loop
+from vslbook.experiments.dime_runs import run_variants
+from vslbook.results import RunDir, collect_runs, load_table
+from vslbook.srl.dime_config import (
+    DIMEConfig,
+    config_differences,
+    describe_differences,
+    named_config,
+)
+from vslbook.stats import iqm_curve
+from vslbook.training import run
+
+ENV = "Pendulum-v1"
+TINY = dict(
+    total_steps=100_000,  # -> 200 env steps (one episode) at the smoke budget
+    learning_starts=0,
+    critic_hidden=16,
+    actor_hidden=16,
+    n_diffusion_steps=2,
+    batch_size=16,
+    eval_every=100_000,  # -> 1000: one evaluation at the end
+    eval_episodes=1,
+    v_min=-1600.0,
+    v_max=100.0,
+    num_threads=1,
+)
+
+
+@pytest.fixture(autouse=True)
+def _threads():
+    old = torch.get_num_threads()
+    yield
+    torch.set_num_threads(old)
+
+
+def _nan_after(monkeypatch, calls: int):
+    """Make the loop's critic update report a NaN loss from its ``calls``-th call on."""
+    real = dime_loop.critic_update
+    count = {"n": 0}
+
+    def update(agent, batch):
+        stats = real(agent, batch)
+        count["n"] += 1
+        if count["n"] >= calls:
+            return stats._replace(loss=torch.tensor(float("nan")))
+        return stats
+
+    monkeypatch.setattr(dime_loop, "critic_update", update)
+
+
+def test_divergence_marks_the_run_failed_never_done(tmp_path, monkeypatch):
+    _nan_after(monkeypatch, calls=7)  # 2 critic updates per step: the 7th is in step 4
+    with pytest.warns(UserWarning, match="diverged at step 4: non-finite critic_loss"):
+        rd = run("dime", ENV, 0, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert rd.status == "failed" and not rd.done
+    failure = json.loads((rd.path / "FAILED").read_text())
+    assert failure["step"] == 4 and failure["quantity"] == "critic_loss"
+    with pytest.raises(RuntimeError, match="FAILED"):
+        rd.mark_done({})
+    # a second call does not train again (same code, deterministic divergence)
+    monkeypatch.undo()
+    with pytest.warns(UserWarning, match="diverged before"):
+        again = run("dime", ENV, 0, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert again.path == rd.path and again.status == "failed"
+    collect_runs([rd], tmp_path / "tables")
+    assert load_table("runs.csv", tmp_path / "tables").status.tolist() == ["failed"]
+
+
+def test_non_finite_parameter_is_caught_at_evaluation(tmp_path, monkeypatch):
+    real = dime_loop.evaluate
+
+    def poisoned(policy, env, **kwargs):
+        return real(policy, env, **kwargs)
+
+    def corrupt_then_check(step, agent):
+        with torch.no_grad():
+            agent.policy.score_net.out.bias.fill_(float("inf"))
+        return check(step, agent)
+
+    check = dime_loop._require_finite_parameters
+    monkeypatch.setattr(dime_loop, "_require_finite_parameters", corrupt_then_check)
+    with pytest.warns(UserWarning, match="non-finite parameter policy.score_net.out.bias"):
+        rd = run("dime", ENV, 1, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert rd.failure["step"] == 200
+
+
+def test_statistics_name_the_runs_they_could_not_use(tmp_path, monkeypatch):
+    _nan_after(monkeypatch, calls=1)  # every run of this call diverges at its first update
+    with pytest.warns(UserWarning, match="diverged"):
+        bad = run_variants(ENV, {"x": ("dime", {})}, seeds=1, budget="smoke",
+                           root=tmp_path / "r", tables=tmp_path / "t1", common=TINY,
+                           progress=False)  # fmt: skip
+    assert list(bad.unusable) == [bad.runs["x"][0].name]
+    assert "not used (1)" in bad.captions()
+    monkeypatch.undo()
+    good = run_variants(ENV, {"y": ("dime", {"actor_hidden": 8})}, seeds=1, budget="smoke",
+                        root=tmp_path / "r", tables=tmp_path / "t2", common=TINY,
+                        progress=False)  # fmt: skip
+    frames = [f for f in (bad.evals, good.evals) if not f.empty]
+    both = type(good)(pd.concat(frames), {**bad.runs, **good.runs},
+                      {**bad.overrides, **good.overrides})  # fmt: skip
+    with pytest.warns(UserWarning, match=r"1 run\(s\) could not be used .*FAILED"):
+        rows = both.curve_rows()
+    assert set(rows.variant) == {"y"}
+    # iqm_curve itself reports runs whose values are not finite
+    frame = pd.DataFrame({"env_steps": [1, 2, 1, 2], "mean_return": [1.0, np.nan, 2.0, 3.0],
+                          "seed": [0, 0, 1, 1]})  # fmt: skip
+    with pytest.warns(UserWarning, match=r"1 run\(s\) have non-finite 'mean_return'.*0 \(1 point"):
+        curve = iqm_curve(frame, reps=50)
+    assert curve.attrs["unused_runs"] == {"0": 1}
+    assert curve.n_runs.tolist() == [2, 1]
+
+
+def test_finished_run_is_reused_only_by_the_same_code(tmp_path, capsys):
+    kwargs = dict(root=tmp_path, overrides=TINY, progress=False)
+    first = run("dime", ENV, 0, "smoke", **kwargs)
+    assert first.done and first.code_matches
+    stamp = (first.path / "DONE").stat().st_mtime_ns
+    assert run("dime", ENV, 0, "smoke", **kwargs).path == first.path  # same code: reused
+    assert (first.path / "DONE").stat().st_mtime_ns == stamp
+
+    env = json.loads((first.path / "env.json").read_text())
+    env["code_hash"] = "0" * 64  # as if another version of the package had made it
+    (first.path / "env.json").write_text(json.dumps(env))
+    reused = run("dime", ENV, 0, "smoke", reuse_stale=True, **kwargs)
+    assert reused.path == first.path and not reused.code_matches
+    assert "WARNING" in capsys.readouterr().out
+
+    fresh = run("dime", ENV, 0, "smoke", **kwargs)
+    assert fresh.path == first.path and fresh.done and fresh.code_matches
+    moved = list((tmp_path / "_stale").iterdir())
+    assert len(moved) == 1 and RunDir.open(moved[0]).code_hash == "0" * 64
+    assert "moved to" in capsys.readouterr().out
+
+
+def test_named_configurations_and_generated_differences():
+    cpu = named_config("cpu-256")
+    diffs = config_differences(cpu, DIMEConfig)
+    assert diffs == {"n_diffusion_steps": (4, 16), "critic_hidden": (256, 2048)}
+    assert describe_differences({}, DIMEConfig) == "as Table C.2"
+    text = describe_differences({**cpu, "total_steps": 5, "num_threads": 1}, DIMEConfig)
+    assert text == "vs Table C.2: n_diffusion_steps 4 (thesis 16), critic_hidden 256 (thesis 2048)"
+    with pytest.raises(ValueError, match="unknown named configuration 'gpu'"):
+        named_config("gpu")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert config_differences(DIMEConfig(learning_starts=0)) == {"learning_starts": (0, 5000)}
