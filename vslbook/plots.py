@@ -184,11 +184,24 @@ def learning_curve(
 ) -> Line2D:
     """Plot the IQM line of ``curve_df`` with a shaded ``lo``–``hi`` band; return the line.
 
-    Extra keyword arguments go to ``ax.plot`` (e.g. ``linestyle``).
+    Extra keyword arguments go to ``ax.plot`` (e.g. ``linestyle``). A curve of a single
+    point (a short run evaluated once) is drawn as a marker with its interval as an error
+    bar, so it stays visible.
     """
     curve = _check_curve(curve_df, x, "learning_curve")
     if color is None and label is not None and label in METHOD_COLORS:
         color = METHOD_COLORS[label]
+    if len(curve) == 1:
+        kw.setdefault("marker", "o")
+        (line,) = ax.plot(curve[x], curve["iqm"], label=label, color=color, **kw)
+        ax.errorbar(curve[x], curve["iqm"], yerr=[curve["iqm"] - curve["lo"],
+                    curve["hi"] - curve["iqm"]], color=line.get_color(), capsize=3,
+                    linestyle="none")  # fmt: skip
+        if not ax.get_xlabel():
+            ax.set_xlabel(x.replace("_", " "))
+        if not ax.get_ylabel():
+            ax.set_ylabel("IQM return")
+        return line
     (line,) = ax.plot(curve[x], curve["iqm"], label=label, color=color, **kw)
     ax.fill_between(
         curve[x], curve["lo"], curve["hi"], color=line.get_color(), alpha=band_alpha,

@@ -318,6 +318,8 @@ def describe_differences(config: Any, config_cls: type | None = None) -> str:
 
 
 def _fmt(value: Any) -> str:
+    if value is None:
+        return "none"
     if isinstance(value, float):
         return f"{value:g}"
     return str(value)
