@@ -5,14 +5,18 @@ episodes); it never changes an algorithm or a hyper-parameter. The active preset
 from the environment variable ``VSLBOOK_BUDGET`` (default ``reduced``):
 
 ``smoke``    every notebook in about a minute on 2 CPU cores: CI, "does it run".
-``reduced``  a chapter in minutes to about an hour on a laptop; large enough for the
-             qualitative result of a figure to show.
+``reduced``  a chapter in minutes to hours on a laptop (Chapter 5, with 3 seeds per curve:
+             about three hours on 2 cores); large enough for the qualitative result of a
+             figure to show.
 ``full``     the thesis's own budgets (iterations, steps, 10 seeds): meant for a cluster
              through :mod:`vslbook.sweep`.
 
 An experiment states its full-budget counts (from the thesis) and asks the budget for
 its share: ``budget.scale(1_000_000)`` or, where a fraction is not a good fit (e.g. the
-number of diffusion steps to sweep over), ``budget.pick(smoke=..., reduced=..., full=...)``.
+length of a stand-in experiment the thesis does not have), a count per budget with
+``budget.pick(smoke=..., reduced=..., full=...)`` and :meth:`Budget.full_count`. Network
+sizes are not counts: a smaller network is a named configuration
+(:data:`vslbook.srl.dime_config.NAMED_CONFIGS`), chosen visibly, never implied by a budget.
 """
 
 from __future__ import annotations
