@@ -294,7 +294,7 @@ display(side.round(1))
 # | CrossQ | the baseline of Figs. 5.2–5.3 | `crossq` (Table C.3) |
 #
 # The runs keep Table C.2's 5000 uniform exploration steps, so learning starts at step 5000;
-# how long they run after that is the budget's choice (100 steps at `smoke`, 3000 at
+# how long they run after that is the budget's choice (50 steps at `smoke`, 3000 at
 # `reduced`). With three seeds of a small network these panels show that every switch trains
 # and which way it points on this task, not the thesis's rankings.
 
@@ -309,9 +309,9 @@ variants = {
     "fixed β": ("dime", {"learn_beta": False}),
     "CrossQ": ("crossq", {}),
 }
-steps = budget.pick(smoke=5_100, reduced=8_000, full=100_000)  # env steps at this budget
+steps = budget.pick(smoke=5_050, reduced=8_000, full=100_000)  # env steps at this budget
 common = {**named_config(LIVE["small"]), "total_steps": budget.full_count(steps),
-          "eval_every": budget.full_count(budget.pick(smoke=5_100, reduced=1_000, full=5_000)),
+          "eval_every": budget.full_count(budget.pick(smoke=5_050, reduced=1_000, full=5_000)),
           "v_min": -1600.0, "v_max": 100.0}
 abl = run_variants("Pendulum-v1", variants, seeds=budget.seeds, budget=budget, root=RUNS,
                    tables=TABLES / f"ch5-ablations-{budget.name}", common=common)
@@ -362,7 +362,7 @@ print(final.groupby("variant").agg(["mean", "min", "max", "count"]).round(1).to_
 from vslbook.envs.point_mass import GOALS
 
 alphas = (0.01, 1.0, 5.0)  # the thesis's panels run from small α up to 4 and 5
-pm_steps = budget.pick(smoke=5_100, reduced=10_000, full=100_000)
+pm_steps = budget.pick(smoke=5_050, reduced=10_000, full=100_000)
 pm_variants = {f"α = {a:g}": ("dime", {"fixed_alpha": a}) for a in alphas}
 # One seed per α: the figure shows one agent's value map and rollouts, as the thesis's does.
 pm = run_variants("vslbook/PointMassFourGoals-v0", pm_variants, seeds=1, budget=budget,
