@@ -160,12 +160,6 @@ def _wait_past_checkpoint(proc: subprocess.Popen, root: Path) -> tuple[int, int]
     )
 
 
-@pytest.fixture(autouse=True)
-def _restore_threads():
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
-
 
 @pytest.mark.slow
 def test_sigkill_mid_run_then_resume_matches_uninterrupted(tmp_path):

@@ -63,7 +63,6 @@ steps Pendulum needs to learn to swing up do not fit a test.
 from __future__ import annotations
 
 import pytest
-import torch
 
 from vslbook.training import run
 
@@ -87,12 +86,6 @@ CONFIG = dict(
 )
 THRESHOLD = 20.0
 
-
-@pytest.fixture(autouse=True)
-def _restore_threads():
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
 
 
 @pytest.mark.slow

@@ -42,12 +42,6 @@ def _metrics(rd):
     return [json.loads(x) for x in (rd.path / "metrics.jsonl").read_text().splitlines()]
 
 
-@pytest.fixture(autouse=True)
-def _few_threads():
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
-
 
 def _run(root, algo="dime", seed=0, **extra):
     return run(algo, ENV, seed, "smoke", root=root, overrides=_tiny(**extra), progress=False)

@@ -37,12 +37,6 @@ TINY = dict(
 )
 
 
-@pytest.fixture(autouse=True)
-def _threads():
-    old = torch.get_num_threads()
-    yield
-    torch.set_num_threads(old)
-
 
 def _nan_after(monkeypatch, calls: int):
     """Make the loop's critic update report a NaN loss from its ``calls``-th call on."""
@@ -156,3 +150,13 @@ def test_named_configurations_and_generated_differences():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert config_differences(DIMEConfig(learning_starts=0)) == {"learning_starts": (0, 5000)}
+
+
+def test_a_runs_thread_setting_does_not_outlive_it(tmp_path):
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        run("dime", ENV, 3, "smoke", root=tmp_path, overrides=TINY, progress=False)
+        assert torch.get_num_threads() == 2  # TINY sets num_threads=1 for the run only
+    finally:
+        torch.set_num_threads(before)

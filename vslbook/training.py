@@ -83,12 +83,17 @@ def run(
         return rd
     if rd.done:
         return rd
+    import torch  # not at module level: `vslbook budgets` and the like stay torch-free
+
+    threads = torch.get_num_threads()  # a config's num_threads holds for this run only
     try:
         summary = spec.train(rd, record, bud, progress=progress, stop_after=stop_after)
     except DivergenceError as err:
         rd.mark_failed(err)
         warnings.warn(f"run {rd.name} {err}; marked FAILED in {rd.path}", stacklevel=2)
         return rd
+    finally:
+        torch.set_num_threads(threads)
     if summary is not None:
         rd.mark_done(summary)
     return rd
