@@ -160,3 +160,40 @@ def test_a_runs_thread_setting_does_not_outlive_it(tmp_path):
         assert torch.get_num_threads() == 2  # TINY sets num_threads=1 for the run only
     finally:
         torch.set_num_threads(before)
+
+
+def test_code_identity_covers_only_the_code_a_run_can_reach(tmp_path):
+    from vslbook.registry import get_algorithm
+    from vslbook.results import NOT_RUN_CODE, code_fingerprint
+
+    rd = run("dime", ENV, 0, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    env = json.loads((rd.path / "env.json").read_text())
+    assert env["code_excluded"] == sorted(get_algorithm("dime").independent_of)
+    assert rd.code_matches and env["code_hash"] == code_fingerprint(("erl/", "envs/robot/"))
+    # Leaving out existing files changes the hash; the bare call still covers erl/.
+    assert code_fingerprint() != code_fingerprint(("erl/",))
+    assert set(NOT_RUN_CODE) >= {"figures.py", "plots.py", "stats.py"}
+    from vslbook.registry import ALGORITHM_MODULES, ALGORITHMS, load_plugins
+
+    load_plugins()  # every registered algorithm says where it lives
+    assert set(ALGORITHMS) <= set(ALGORITHM_MODULES)
+
+
+def test_dime_runs_import_nothing_they_declare_independent_of(tmp_path):
+    # The claim behind `independent_of` checked in a fresh interpreter: a DIME run through
+    # the CLI loads no module under vslbook/erl or vslbook/envs/robot.
+    import subprocess
+    import sys
+
+    script = (
+        "import sys, json\n"
+        "from vslbook.training import run\n"
+        f"run('dime', {ENV!r}, 0, 'smoke', root={str(tmp_path)!r}, overrides={TINY!r},"
+        " progress=False)\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('vslbook.'))))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    assert "vslbook.srl.dime" in loaded
+    assert not [m for m in loaded if m.startswith(("vslbook.erl", "vslbook.envs.robot"))]

@@ -34,6 +34,9 @@ class Algorithm:
         config: frozen dataclass of hyper-parameters with the thesis's defaults.
         envs: environment ids the algorithm is meant for (empty: any).
         doc: one line for ``vslbook algorithms``.
+        independent_of: package-relative paths (``"erl/"``) the algorithm's runs never
+            import; editing them does not make its finished runs stale
+            (:func:`vslbook.results.code_fingerprint`).
     """
 
     name: str
@@ -41,6 +44,7 @@ class Algorithm:
     config: type
     envs: tuple[str, ...] = ()
     doc: str = ""
+    independent_of: tuple[str, ...] = ()
 
     def check_env(self, env: str) -> None:
         """Raise a clear error if ``env`` is not one this algorithm is meant for."""
@@ -71,8 +75,12 @@ def register_algorithm(
     config: type,
     envs: tuple[str, ...] = (),
     doc: str = "",
+    independent_of: tuple[str, ...] = (),
 ) -> Algorithm:
-    algo = Algorithm(name=name, train=train, config=config, envs=tuple(envs), doc=doc)
+    algo = Algorithm(
+        name=name, train=train, config=config, envs=tuple(envs), doc=doc,
+        independent_of=tuple(independent_of),
+    )  # fmt: skip
     ALGORITHMS[name] = algo
     return algo
 
@@ -89,8 +97,21 @@ def load_plugins() -> None:
         importlib.import_module(mod)
 
 
+#: Where each algorithm is registered, so that looking one up imports only its own module
+#: (a DIME run never imports the episodic code; see ``Algorithm.independent_of``).
+ALGORITHM_MODULES: dict[str, str] = {
+    "dime": "vslbook.srl.dime",
+    "dime-gaussian": "vslbook.srl.dime",
+    "crossq": "vslbook.srl.dime",
+    "erl-pg": "vslbook.erl.pg",
+}
+
+
 def get_algorithm(name: str) -> Algorithm:
-    load_plugins()
+    if name in ALGORITHM_MODULES:
+        importlib.import_module(ALGORITHM_MODULES[name])
+    if name not in ALGORITHMS:
+        load_plugins()
     if name not in ALGORITHMS:
         raise ValueError(
             f"unknown algorithm {name!r}; expected one of {', '.join(sorted(ALGORITHMS))}"

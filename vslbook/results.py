@@ -11,7 +11,7 @@ A *run directory* holds everything one training run leaves behind::
         FAILED            written instead of DONE when a run diverged: step and quantity
 
 Code identity: ``env.json`` records :func:`code_fingerprint` (sha256 of the package's
-Python sources) beside the git sha and a dirty flag. :attr:`RunDir.code_matches` compares
+Python sources that the run can reach) beside the git sha and a dirty flag. :attr:`RunDir.code_matches` compares
 it with the running code, so a finished run is reused only by the code that produced it
 (:func:`vslbook.training.run`).
 
@@ -231,23 +231,41 @@ def _git_dirty() -> bool | None:
     return bool(out.stdout.strip()) if out.returncode == 0 else None
 
 
-@functools.lru_cache(maxsize=1)
-def code_fingerprint() -> str:
+#: Package paths no training run reads: analysis, figures and the notebooks' numerical checks.
+#: Editing them never makes a run stale (:func:`code_fingerprint`).
+NOT_RUN_CODE: tuple[str, ...] = (
+    "bounds/", "experiments/", "figures.py", "plots.py", "stats.py",
+)  # fmt: skip
+
+
+def code_fingerprint(exclude: tuple[str, ...] | list[str] = ()) -> str:
     """sha256 over the package's Python sources (relative path and bytes of each file).
 
     It names the code that produced a run independently of git: an uncommitted edit
-    changes it, a commit that touches only notebooks or docs does not. Computed once per
-    process, so it names the code this process loaded, even if files change on disk later.
+    changes it, a commit that touches only notebooks or docs does not. Files under
+    :data:`NOT_RUN_CODE` and under ``exclude`` (package-relative prefixes such as
+    ``"erl/"``: code an algorithm's runs cannot reach, declared by the algorithm's registry
+    entry) are left out, so adding Chapter 3 code does not make Chapter 5 runs stale.
+    Computed once per process and scope, so it names the code this process loaded, even if
+    files change on disk later.
     """
+    return _fingerprint(tuple(sorted(set(NOT_RUN_CODE) | set(exclude))))
+
+
+@functools.lru_cache(maxsize=16)
+def _fingerprint(skip: tuple[str, ...]) -> str:
     package = Path(__file__).resolve().parent
     digest = hashlib.sha256()
     for path in sorted(package.rglob("*.py")):
-        digest.update(path.relative_to(package).as_posix().encode("utf-8") + b"\0")
+        rel = path.relative_to(package).as_posix()
+        if rel.startswith(skip):
+            continue
+        digest.update(rel.encode("utf-8") + b"\0")
         digest.update(path.read_bytes() + b"\0")
     return digest.hexdigest()
 
 
-def _environment() -> dict[str, Any]:
+def _environment(code_exclude: tuple[str, ...] = ()) -> dict[str, Any]:
     """What ``env.json`` records: where and with what a run was started."""
     versions: dict[str, str | None] = {}
     for name, dist in TRACKED_PACKAGES.items():
@@ -262,7 +280,8 @@ def _environment() -> dict[str, Any]:
         "packages": versions,
         "git_sha": _git_sha(),
         "git_dirty": _git_dirty(),
-        "code_hash": code_fingerprint(),
+        "code_hash": code_fingerprint(code_exclude),
+        "code_excluded": sorted(code_exclude),
         "timestamp": datetime.now(UTC).isoformat(timespec="seconds"),
     }
 
@@ -321,6 +340,7 @@ class RunDir:
         *,
         name: str | None = None,
         exist_ok_resume: bool = True,
+        code_exclude: tuple[str, ...] = (),
     ) -> RunDir:
         """Create ``root/name`` and write ``config.json`` and ``env.json``.
 
@@ -331,6 +351,8 @@ class RunDir:
                 keys ``algo``, ``env`` and ``seed`` where present.
             exist_ok_resume: if the directory exists with the same config, return it so
                 the run can resume; if False an existing directory is an error.
+            code_exclude: package paths the run cannot depend on, left out of the recorded
+                :func:`code_fingerprint` (and recorded beside it).
 
         Raises:
             ValueError: the directory exists with a different ``config.json`` (the message
@@ -363,7 +385,7 @@ class RunDir:
                 )
             return run
         run.path.mkdir(parents=True, exist_ok=True)
-        _atomic_write(run.path / cls.ENV, _json_bytes(_environment()))
+        _atomic_write(run.path / cls.ENV, _json_bytes(_environment(tuple(code_exclude))))
         _atomic_write(config_file, _json_bytes(plain))
         return run
 
@@ -570,8 +592,16 @@ class RunDir:
 
     @property
     def code_matches(self) -> bool:
-        """True when the run was created by the code that is running now."""
-        return self.code_hash == code_fingerprint()
+        """True when the run was created by the code that is running now.
+
+        Compared over the same files as when the run was created: ``env.json`` records
+        which package paths its fingerprint left out.
+        """
+        try:
+            exclude = tuple(self.env.get("code_excluded", ()))
+        except FileNotFoundError:
+            exclude = ()
+        return self.code_hash == code_fingerprint(exclude)
 
 
 # --------------------------------------------------------------------------- RNG state

@@ -71,7 +71,7 @@ def run(
         "budget": bud.name,
         **dataclasses.asdict(config),
     }
-    rd = RunDir.create(root, record)
+    rd = RunDir.create(root, record, code_exclude=spec.independent_of)
     if not rd.code_matches:  # only an existing directory can have been made by other code
         rd = _stale(rd, root, record, reuse_stale)
     if rd.failed:
@@ -106,7 +106,7 @@ def _reuse_from_env() -> bool:
 def _stale(rd: RunDir, root: str | Path, record: dict, reuse_stale: bool | None) -> RunDir:
     """Handle a run directory made by other code: reuse it (warning) or move it aside."""
     old = (rd.code_hash or "unknown")[:12]
-    new = code_fingerprint()[:12]
+    new = code_fingerprint(tuple(rd.env.get("code_excluded", ())))[:12]
     what = f"run {rd.name} ({rd.status}) was made by other code (code hash {old}, now {new})"
     if reuse_stale if reuse_stale is not None else _reuse_from_env():
         print(f"WARNING: {what}; reusing it because reuse_stale / ${REUSE_STALE_ENV} is set")

@@ -421,21 +421,27 @@ def train(
     }
 
 
+# Chapter 5's runs never import the episodic (Chapters 2-4) code.
+_NOT_SRL = ("erl/", "envs/robot/")
+
 register_algorithm(
     "dime",
     train=train,
     config=DIMEConfig,
     doc="DIME (Algorithm 4): diffusion policy, distributional CrossQ critics, autotuned α",
+    independent_of=_NOT_SRL,
 )
 register_algorithm(
     "dime-gaussian",
     train=partial(train, config_cls=DIMEGaussianConfig),
     config=DIMEGaussianConfig,
     doc="DIME's critic and updates with a tanh-Gaussian policy (Fig. 5.4c-d ablation)",
+    independent_of=_NOT_SRL,
 )
 register_algorithm(
     "crossq",
     train=partial(train, config_cls=CrossQConfig),
     config=CrossQConfig,
     doc="CrossQ: tanh-Gaussian policy, BatchRenorm scalar critics, no target network",
+    independent_of=_NOT_SRL,
 )
