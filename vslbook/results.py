@@ -12,8 +12,8 @@ A *run directory* holds everything one training run leaves behind::
 
 Code identity: ``env.json`` records :func:`code_fingerprint` (sha256 of the package's
 Python sources that the run can reach) beside the git sha and a dirty flag.
-:attr:`RunDir.code_matches` compares it with the running code, so a finished run is reused only by the code that produced it
-(:func:`vslbook.training.run`).
+:attr:`RunDir.code_matches` compares it with the running code, so a finished run is
+reused only by the code that produced it (:func:`vslbook.training.run`).
 
 Resuming: :meth:`RunDir.save_checkpoint` records how many lines ``metrics.jsonl`` had at
 that moment and :meth:`RunDir.load_checkpoint` truncates the file back to that count, so
