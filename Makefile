@@ -12,6 +12,9 @@ TORCH  := torch==2.13.0
 # MyoSuite declares gymnasium<1.3 and ~70 optional packages; its hand tasks run on the
 # pinned stack when installed without dependencies (see vslbook/envs/step_based.py).
 MYO    := myosuite==3.0.0 myo-sim==0.2.3 termcolor colorednoise
+# The robot tasks of Chapters 3-4 read fancy-gym's MIT model files from its wheel; its Python
+# code needs mujoco 2.3.3 / gymnasium < 1 and is never imported (vslbook/envs/robot/assets.py).
+FANCY  := fancy-gym==0.3.0
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
 VSLBOOK_BUDGET ?= reduced
@@ -39,6 +42,7 @@ $(STAMP): pyproject.toml Makefile | $(BIN)/python
 	$(BIN)/python -m pip install --quiet -e ".[notebooks,dev]"
 	$(BIN)/python -m ipykernel install --sys-prefix --name python3 >/dev/null
 	$(BIN)/python -m pip install --quiet --no-deps $(MYO)
+	$(BIN)/python -m pip install --quiet --no-deps $(FANCY)
 	touch $(STAMP)
 
 setup: $(STAMP)

@@ -31,7 +31,7 @@ def fancy_gym_dir() -> Path:
 
 
 def asset_path(relative: str) -> Path:
-    """Path of a file under ``fancy_gym/envs/mujoco/``, e.g. ``reacher/assets/reacher_5links.xml``."""
+    """Path of a file under ``fancy_gym/envs/mujoco/`` (``reacher/assets/reacher_5links.xml``)."""
     path = fancy_gym_dir() / "envs" / "mujoco" / relative
     if not path.is_file():
         raise FileNotFoundError(f"{path} is missing from the installed fancy-gym; {INSTALL_HINT}")
