@@ -1,0 +1,96 @@
+"""Episodes per second of each robot task next to the bare physics it needs.
+
+For every task in :data:`vslbook.envs.robot.TASKS` (or those named on the command line) this
+evaluates a batch of episodes with small random parameters in one process, counts the
+``mujoco.mj_step`` calls the batch made (physics steps, ``nstep`` included), and then times
+exactly that many bare ``mj_step`` calls on the task's own model. The ratio is the overhead
+of everything around the physics (trajectory generation, validity check, control, contacts,
+reward); the target is under 20 %. A second line evaluates the same batch through the worker
+pool (``--workers``, default: the machine's cores).
+
+    python benchmarks/robot_tasks.py --episodes 50
+    python benchmarks/robot_tasks.py planar-reacher --episodes 100000
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import mujoco
+import numpy as np
+
+from vslbook.envs.robot import TASKS, make_task
+from vslbook.envs.robot.task import resolve_workers
+
+
+class _CountSteps:
+    """Wraps ``mujoco.mj_step`` and counts physics steps (nstep included)."""
+
+    def __init__(self) -> None:
+        self.real = mujoco.mj_step
+        self.steps = 0
+
+    def __call__(self, model, data, nstep: int = 1) -> None:
+        self.steps += int(nstep)
+        self.real(model, data, nstep)
+
+
+def _model_of(task) -> mujoco.MjModel | None:
+    for value in vars(task).values():
+        if isinstance(value, mujoco.MjModel):
+            return value
+    return None
+
+
+def bench(name: str, episodes: int, workers: int, scale: float, seed: int) -> None:
+    task = make_task(name)
+    rng = np.random.default_rng(seed)
+    contexts = task.sample_contexts(episodes, rng)
+    theta = scale * rng.standard_normal((episodes, task.n_params))
+    if hasattr(task, "benchmark_theta"):  # a task may say what a typical valid θ looks like
+        theta = task.benchmark_theta(rng, episodes)
+    counter = _CountSteps()
+    mujoco.mj_step = counter
+    try:
+        start = time.perf_counter()
+        out = task.evaluate(theta, contexts, workers=0)
+        wall = time.perf_counter() - start
+    finally:
+        mujoco.mj_step = counter.real
+    line = f"{name:28s} {episodes / wall:10.1f} episodes/s  ({out.n_executed} executed)"
+    model = _model_of(task)
+    if model is not None and counter.steps:
+        data = mujoco.MjData(model)
+        start = time.perf_counter()
+        for _ in range(counter.steps):
+            mujoco.mj_step(model, data)
+        bare = time.perf_counter() - start
+        line += (
+            f"; physics {counter.steps / episodes:.0f} steps/episode, bare mj_step "
+            f"{counter.steps / bare:9.0f} steps/s, overhead {100 * (wall - bare) / bare:5.1f} %"
+        )
+    print(line, flush=True)
+    if workers > 1:
+        start = time.perf_counter()
+        task.evaluate(theta, contexts, workers=workers)
+        rate = episodes / (time.perf_counter() - start)
+        print(f"{'':28s} {rate:10.1f} episodes/s with {workers} workers")
+    task.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("tasks", nargs="*", help=f"default: all of {', '.join(TASKS)}")
+    parser.add_argument("--episodes", type=int, default=50)
+    parser.add_argument("--workers", type=int, default=None)
+    parser.add_argument("--scale", type=float, default=0.1, help="std of the random θ")
+    parser.add_argument("--seed", type=int, default=0)
+    args = parser.parse_args()
+    workers = resolve_workers(args.workers)
+    for name in args.tasks or list(TASKS):
+        bench(name, args.episodes, workers, args.scale, args.seed)
+
+
+if __name__ == "__main__":
+    main()
