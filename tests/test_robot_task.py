@@ -188,3 +188,28 @@ def test_joint_limit_excess():
     hi, lo = joint_limit_excess(q, low=np.array([-1.0, -1.0]), high=np.array([0.5, 1.0]))
     assert hi == pytest.approx((0.0 + 1.0 + 0.5 + 0.0) / 4)
     assert lo == pytest.approx((0.0 + 0.0 + 0.0 + 2.0) / 4)
+
+
+def test_every_task_is_registered_under_its_name_with_a_gymnasium_id():
+    import gymnasium as gym
+
+    from vslbook.envs.robot import STEP_IDS, TASKS, make_task, task_class
+
+    for name, (_, env_id) in TASKS.items():
+        cls = task_class(name)
+        assert cls.name == name and env_id in gym.registry
+        assert len(cls.context_names) == len(cls.context_low) == len(cls.context_high)
+    assert all(env_id in gym.registry for env_id in STEP_IDS)
+    with pytest.raises(ValueError, match="unknown task 'beer-pog'; did you mean beer-pong"):
+        make_task("beer-pog")
+
+
+def test_the_one_step_env_leaves_numbers_that_do_not_apply_out_of_its_info():
+    class Sometimes(Parabola):
+        def episode(self, theta, context):
+            return Episode(0.0, False, True, {"distance": float("nan")})
+
+    env = EpisodicEnv(Sometimes)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.zeros(2))
+    assert "distance" not in info and info["executed"]

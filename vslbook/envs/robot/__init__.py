@@ -23,11 +23,27 @@ import gymnasium as gym
 
 from vslbook.envs.robot.task import Episode, EpisodicEnv, EpisodicTask, Rollouts
 
-#: name → (module:class, one-step gymnasium id). Filled as the tasks land.
-TASKS: dict[str, tuple[str, str]] = {}
+_R = "vslbook.envs.robot."
+
+#: name → (module:class, one-step gymnasium id); the name is the class's ``name``.
+TASKS: dict[str, tuple[str, str]] = {
+    "planar-reacher": (_R + "planar_reacher:PlanarReacherTask", "vslbook/PlanarReacher-v0"),
+    "reacher5": (_R + "reacher5:Reacher5", "vslbook/Reacher5-v0"),
+    "reacher5-ch3": (_R + "reacher5:Reacher5Ch3", "vslbook/Reacher5Ch3-v0"),
+    "table-tennis-4d": (_R + "table_tennis:TableTennis4D", "vslbook/TableTennis4D-v0"),
+    "table-tennis-hard": (_R + "table_tennis:TableTennisHard", "vslbook/TableTennisHard-v0"),
+    "beer-pong": (_R + "beer_pong:BeerPong", "vslbook/BeerPong-v0"),
+    "hopper-jump": (_R + "hopper_jump:HopperJump", "vslbook/HopperJump-v0"),
+    "box-pushing-obstacle": (
+        _R + "box_pushing:BoxPushingObstacle",
+        "vslbook/BoxPushingObstacle-v0",
+    ),
+}
 
 #: Step-based gymnasium ids (PPO baselines): id → module:class.
-STEP_IDS: dict[str, str] = {}
+STEP_IDS: dict[str, str] = {
+    "vslbook/Reacher5Ch3Step-v0": _R + "reacher5_step:Reacher5Ch3StepEnv",
+}
 
 
 def task_class(name: str) -> type[EpisodicTask]:

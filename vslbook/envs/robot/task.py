@@ -326,7 +326,8 @@ class EpisodicEnv(gym.Env):
 
     ``reset`` draws c ~ p(c) (or takes ``options={"context": c}``); ``step(θ)`` runs the
     episode in this process and returns (c, R, terminated=True, truncated=False, info) with
-    ``info`` holding ``success``, ``executed`` and the task's per-episode numbers.
+    ``info`` holding ``success``, ``executed`` and the task's per-episode numbers (those that
+    apply: NaN entries are left out, so gymnasium's checker can compare infos).
     """
 
     metadata: dict[str, Any] = {"render_modes": []}
@@ -351,5 +352,7 @@ class EpisodicEnv(gym.Env):
     def step(self, action: Any):
         th = self.task.check_theta(action, n=1)
         ep = self.task.episodes(th, self._context[None])[0]
-        info = {"success": bool(ep.success), "executed": bool(ep.executed), **ep.info}
+        # A number that does not apply to this episode (NaN) is left out of the info.
+        extra = {k: v for k, v in ep.info.items() if not (isinstance(v, float) and math.isnan(v))}
+        info = {"success": bool(ep.success), "executed": bool(ep.executed), **extra}
         return self._context.copy(), float(ep.ret), True, False, info

@@ -1,0 +1,239 @@
+"""Box Pushing with Obstacle (thesis Section 4.5.1, Appendix B.4.2.1)."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from vslbook.envs.robot.box_pushing import (
+    BOX_START,
+    Q0,
+    BoxPushingObstacle,
+    goal_quat,
+    is_success,
+    step_reward,
+)
+from vslbook.envs.robot.primitives import joint_limit_excess
+from vslbook.envs.robot.task import EpisodicEnv
+
+# A context with the obstacle beside the straight path from the start to the goal, and a θ
+# built by IK along that path (least-squares fit of the ProDMP weights) and polished by a
+# few dozen evaluations of a cross-entropy search (see the report); it succeeds.
+CTX = np.array([0.35, -0.2, math.pi, 0.58, 0.05])
+THETA_OK = np.array([
+    0.3733, 0.0287, -1.0691, -1.4124, 0.7205, -1.4088, -0.4777,
+    -0.7631, 0.6019, -0.7935, -0.4245, -2.3362, 0.5275, -2.5042,
+    0.2238, -0.7299, 0.2190, 0.5918, -0.9592, 0.6029, -0.1977,
+    -0.2534, 0.1525, 0.1618, 0.8942, -1.6094, -1.1842, -3.5797,
+])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def task() -> BoxPushingObstacle:
+    return BoxPushingObstacle()
+
+
+def _lim(q: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    q_max = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+    q_min = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+    return q_min, q_max
+
+
+def test_layout_and_options(task: BoxPushingObstacle) -> None:
+    assert task.n_params == 28 and task.context_dim == 5
+    assert BoxPushingObstacle(goal="learned").n_params == 35
+    with pytest.raises(ValueError, match="goal"):
+        BoxPushingObstacle(goal="relative")
+    with pytest.raises(ValueError, match="theta must have shape"):
+        task.evaluate(np.zeros(35), CTX, workers=0)
+    assert task.model.opt.timestep == pytest.approx(0.002)
+
+
+def test_obstacle_goal_and_box_placed_from_context(task: BoxPushingObstacle) -> None:
+    c = np.array([0.45, -0.5, 1.0, 0.33, -0.12])
+    task.reset(c)
+    m, d = task.model, task.data
+    obs = m.body("obstacle").id
+    np.testing.assert_allclose(d.xpos[obs], [0.33, -0.12, -0.01])
+    base = m.geom("obstacle_base")
+    assert base.bodyid[0] == obs and m.body_mocapid[obs] >= 0
+    np.testing.assert_allclose(base.size, [0.05, 0.05, 0.01])
+    assert base.priority[0] == 1
+    np.testing.assert_allclose(base.friction, [0.3, 0.001, 0.0001])
+    walls = [m.geom(f"obstacle_wall{i}") for i in range(4)]
+    assert all(w.bodyid[0] == obs and w.size[2] == pytest.approx(0.045) for w in walls)
+    tgt = m.body("replan_target_pos").id
+    np.testing.assert_allclose(d.xpos[tgt], [0.45, -0.5, -0.01])
+    np.testing.assert_allclose(d.xquat[tgt], [math.cos(0.5), 0, 0, math.sin(0.5)], atol=1e-12)
+    np.testing.assert_allclose(d.xpos[m.body("box_0").id], BOX_START)
+    np.testing.assert_allclose(d.qpos[:7], Q0)
+    # the obstacle collides with the box: put the box on it and look for a contact pair
+    adr = m.jnt_qposadr[m.joint("box_joint").id]
+    d.qpos[adr : adr + 2] = [0.33 + 0.09, -0.12]
+    mujoco.mj_forward(m, d)
+    box, geoms = m.body("box_0").id, {int(base.id)} | {int(w.id) for w in walls}
+    pairs = {(int(d.contact[i].geom1), int(d.contact[i].geom2)) for i in range(d.ncon)}
+    assert any(
+        (m.geom_bodyid[a] == box and b in geoms) or (m.geom_bodyid[b] == box and a in geoms)
+        for a, b in pairs
+    )
+
+
+def _rules(c: np.ndarray) -> np.ndarray:
+    g, o, s = c[:, :2], c[:, 3:], np.array([0.4, 0.3])
+    return (
+        (np.hypot(*(g - s).T) > 0.3)
+        & (np.hypot(*(o - s).T) >= 0.15)
+        & (np.hypot(*(o - g).T) >= 0.15)
+        & (c[:, 1] < c[:, 4])
+    )
+
+
+def test_sampled_contexts_obey_rules(task: BoxPushingObstacle) -> None:
+    c = task.sample_contexts(500, np.random.default_rng(3))
+    lo, hi = [0.3, -0.7, 0, 0.3, -0.3], [0.6, 0.45, 2 * math.pi, 0.6, 0.15]
+    assert np.all((c >= lo) & (c <= hi))
+    assert _rules(c).all()
+    raw = np.random.default_rng(4).uniform(lo, hi, (4000, 5))
+    np.testing.assert_array_equal(task.context_valid(raw), _rules(raw))
+    # each rule rejects on its own (Euclidean distance, as in the thesis)
+    for bad in (
+        [0.45, 0.05, 1.0, 0.3, 0.15],  # goal 0.255 m from the start
+        [0.4, -0.3, 1.0, 0.5, -0.2],  # obstacle 0.141 m from the goal (|dy| = 0.1)
+        [0.35, -0.2, 1.0, 0.5, -0.25],  # obstacle not between (y_o < y_g)
+    ):
+        assert not task.context_valid(np.array([bad]))[0], bad
+    assert task.context_valid(CTX[None])[0]
+    # |o - start| >= 0.15 is implied by the box (y_o <= 0.15 = 0.3 - 0.15): never binds
+    assert np.all(np.hypot(raw[:, 3] - 0.4, raw[:, 4] - 0.3) >= 0.15)
+    # |o - start| >= 0.15 is implied by the box (y_o <= 0.15 = 0.3 - 0.15), so it never binds
+    assert np.all(np.hypot(raw[:, 3] - 0.4, raw[:, 4] - 0.3) >= 0.15)
+
+
+def test_bad_contexts_give_clear_errors(task: BoxPushingObstacle) -> None:
+    with pytest.raises(ValueError, match=r"shape \(n, 5\)"):
+        task.evaluate(np.zeros(28), np.zeros(4), workers=0)
+    with pytest.raises(ValueError, match="outside the task's context space"):
+        task.evaluate(np.zeros(28), [0.45, 0.05, 1.0, 0.55, 0.15], workers=0)
+    with pytest.raises(ValueError, match="y_goal < y_obstacle"):
+        task.evaluate(np.zeros(28), [0.9, -0.2, 1.0, 0.5, 0.0], workers=0)
+    steps = task.physics_steps
+    r = task.evaluate(np.zeros(28), [0.9, -0.2, 1.0, 0.5, 0.0], workers=0, out_of_range="penalise")
+    assert not r.executed[0] and r.returns[0] == pytest.approx(-(0.3**2))
+    assert task.physics_steps == steps
+
+
+def _expected_reward(bp, bq, gp, gq, tip, rq, q, dq, tau, final) -> float:
+    q_min, q_max = _lim(q)
+    qd_max = np.array([2.175] * 4 + [2.61] * 3)
+    r = -min(max(np.linalg.norm(bp - tip), 0.05), 10.0)
+    r -= min(max(2 / math.pi * math.acos(min(abs(rq @ [0, 1, 0, 0]), 1)), 0.25), 2.0)
+    r -= 0.02 * tau @ tau
+    for j in range(7):
+        r -= max(q[j] - q_max[j], 0) + max(q_min[j] - q[j], 0) + max(abs(dq[j]) - qd_max[j], 0)
+    if final:
+        r -= 350 * np.linalg.norm(bp - gp) + 200 / math.pi * math.acos(min(abs(bq @ gq), 1))
+    return r
+
+
+def test_step_reward_matches_formula() -> None:
+    rng = np.random.default_rng(0)
+    for k in range(20):
+        unit = [rng.normal(size=4) for _ in range(2)]
+        bq, rq = (u / np.linalg.norm(u) for u in unit)
+        args = (
+            rng.uniform(-0.5, 0.5, 3), bq, rng.uniform(-0.5, 0.5, 3), goal_quat(rng.uniform(0, 6)),
+            rng.uniform(-0.5, 0.5, 3), rq, rng.uniform(-3.5, 3.5, 7), rng.uniform(-4, 4, 7),
+            rng.uniform(-10, 10, 7), bool(k % 2),
+        )  # fmt: skip
+        assert step_reward(*args) == pytest.approx(_expected_reward(*args), rel=1e-12)
+    # a rod tip 1 cm from the box, upright rod, no torque: only the clipped costs remain
+    z = np.zeros(3)
+    r = step_reward(z, bq, z, bq, z + 0.01, np.array([0, 1.0, 0, 0]), Q0, np.zeros(7), z, True)
+    assert r == pytest.approx(-0.05 - 0.25)
+
+
+def _place_box(task: BoxPushingObstacle, pos, yaw: float) -> tuple[float, float, float]:
+    gp, gq = task.reset(CTX)
+    m, d = task.model, task.data
+    adr = m.jnt_qposadr[m.joint("box_joint").id]
+    d.qpos[adr : adr + 3] = pos
+    d.qpos[adr + 3 : adr + 7] = goal_quat(yaw)
+    mujoco.mj_forward(m, d)
+    return task.state_reward(gp, gq, np.zeros(7), final=True)
+
+
+def test_reward_cases_from_placed_states(task: BoxPushingObstacle) -> None:
+    goal = np.array([CTX[0], CTX[1], -0.01])
+    r_on, p_on, a_on = _place_box(task, goal, CTX[2])
+    assert p_on == pytest.approx(0.0, abs=1e-12) and a_on == pytest.approx(0.0, abs=1e-6)
+    assert is_success(p_on, a_on)
+    r_pos, p6, a6 = _place_box(task, goal + [0.06, 0, 0], CTX[2])
+    assert p6 == pytest.approx(0.06) and not is_success(p6, a6)
+    # the goal term drops by 350 · 0.06; the rod-tip term (1-Lipschitz) moves by ≤ 0.06
+    assert 350 * 0.06 - 0.06 - 1e-9 <= r_on - r_pos <= 350 * 0.06 + 0.06 + 1e-9
+    r_rot, p_r, a_r = _place_box(task, goal, CTX[2] + 0.6)
+    assert a_r == pytest.approx(0.6, abs=1e-9) and not is_success(p_r, a_r)
+    # the rotation term alone changes by 200/π · arccos(cos 0.3) = 200 · 0.3 / π
+    assert r_on - r_rot == pytest.approx(200 * 0.3 / math.pi, rel=1e-9)
+    assert is_success(0.049, 0.49) and not is_success(0.051, 0.1)
+
+
+def test_invalid_theta_not_simulated(task: BoxPushingObstacle) -> None:
+    th = np.zeros(28)
+    th[12:16] = 40.0  # joint 4 far beyond its upper limit
+    q_d, _ = task.mp.trajectory(th, Q0)
+    q_min, q_max = _lim(q_d)
+    hi = np.mean(np.maximum(q_d - q_max, 0))
+    lo = np.mean(np.maximum(q_min - q_d, 0))
+    assert hi > 0
+    assert (hi, lo) == pytest.approx(joint_limit_excess(q_d, q_min, q_max))
+    steps = task.physics_steps
+    r = task.evaluate(th, CTX, workers=0)
+    assert not r.executed[0] and not r.success[0]
+    assert r.returns[0] == pytest.approx(-1000 - 1000 * (hi + lo))
+    assert task.physics_steps == steps
+    free = BoxPushingObstacle(joint_limit_check=False)
+    assert free.evaluate(th, CTX, workers=0).executed[0] and free.physics_steps == 1000
+
+
+@pytest.mark.slow
+def test_determinism_in_process_and_workers(task: BoxPushingObstacle) -> None:
+    rng = np.random.default_rng(5)
+    c = task.sample_contexts(3, rng)
+    th = 0.5 * rng.normal(size=(3, 28))
+    a = task.evaluate(th, c, workers=0)
+    b = task.evaluate(th, c, workers=0)
+    np.testing.assert_array_equal(a.returns, b.returns)
+    np.testing.assert_array_equal(a.info["pos_error"], b.info["pos_error"])
+    try:
+        w = task.evaluate(th, c, workers=2)
+    finally:
+        task.close()
+    np.testing.assert_array_equal(a.returns, w.returns)
+    np.testing.assert_array_equal(a.success, w.success)
+
+
+def test_constructed_theta_succeeds_random_theta_do_not(task: BoxPushingObstacle) -> None:
+    good = task.evaluate(THETA_OK, CTX, workers=0)
+    assert good.executed[0] and good.success[0]
+    assert good.info["pos_error"][0] < 0.05 and good.info["rot_error"][0] < 0.5
+    rand = task.evaluate(np.random.default_rng(7).normal(size=(6, 28)), CTX, workers=0)
+    assert not rand.success.any()
+    assert good.returns[0] > rand.returns.max() + 50
+    # holding still leaves the box at its start (0.5 m from this goal)
+    still = task.evaluate(np.zeros(28), CTX, workers=0)
+    assert still.info["pos_error"][0] == pytest.approx(0.502, abs=0.03)
+
+
+def test_one_step_env_passes_check_env() -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    env = EpisodicEnv(BoxPushingObstacle)
+    check_env(env, skip_render_check=True)
+    obs, _ = env.reset(seed=0, options={"context": CTX})
+    _, r, term, trunc, info = env.step(np.zeros(28))
+    assert term and not trunc and info["executed"] and np.isfinite(r)

@@ -1,0 +1,335 @@
+"""Beer Pong (thesis Section 3.4, Fig. 3.2; Appendix A.3.2): a Barrett WAM throws a ball
+into a cup whose position on the table is the context.
+
+**Model.** fancy-gym 0.3.0's ``beerpong/assets/beerpong_wo_cup.xml`` (MIT), read from the
+installed wheel with its broken ``meshdir`` patched in memory (``../../meshes/wam/`` →
+``./meshes/wam/``). Timestep 0.005 s, Euler (as in the file). The ball is a sphere on three
+slide joints (``qpos[7:10]`` is its position); the cup body ``cup_table`` carries the sites
+``cup_goal_table`` (top edge, p_c,top) and ``cup_goal_final_table`` (cup ground,
+p_c,bottom) and the geom ``cup_base_table_contact`` lying on the cup's floor.
+
+**Context** c = (cup_x, cup_y) ∈ [−0.32, 0.32] × [−2.2, −1.2] (A.3.2), uniform, no further
+rejection. The cup body is placed at (cup_x, cup_y, 0.840) (the authors' code); because the
+cup mesh is rotated, its axis lies 0.134 m further along −y than the body origin.
+
+**Parameters** θ ∈ ℝ¹⁵ (Section 3.4: "weights and the length of the trajectory"):
+``θ = [l, w_1,1, w_1,2, w_2,1, ..., w_7,2]`` — the movement duration l in seconds first (as
+the package's ProDMP layout puts τ first; the authors' code puts it last), then two ProMP
+weights per joint, dof-major. The desired trajectory is a ProMP (Eq. 2.46) with four
+normalised RBFs per joint on the phase s = t / l (centres 0, ⅓, ⅔, 1, width 0.1 in phase
+units): the weights of the first two RBFs are fixed to zero and the learned ones are
+multiplied by ``weights_scale`` (default √0.02, the authors' scaling), and the result is
+added to the start posture q0 = [0, 1.35, 0, 1.18, 0, −0.786, −1.59]. With the two leading
+zero weights q_d(0) = q0 (to 1e−9) and the arm rests during the first part of the movement,
+as in the authors' construction (their centres are −0.01 … 1.01 with variance 0.01, i.e.
+the same width; our velocities are the exact time derivatives ∂q_d/∂t, theirs are scaled
+by a fixed 3.5 s instead of l).
+
+**Timing and controller** (authors' code; the thesis gives none). l is rounded to the
+control grid, n = round(l / 0.005) steps. At each step the joint torque is
+u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias (gravity and Coriolis compensation) with
+K_p = [200, 300, 100, 100, 10, 10, 2.5], K_d = 0.5·[7, 15, 5, 2.5, 0.3, 0.3, 0.05], not
+clipped, written to ``qfrc_applied`` (the file's motors, ctrl ∈ [−1, 1] with gears, stay at
+ctrl = 0 and are unused, so nothing is clipped or rescaled by a gear). The ball is pinned
+to the hand site ``init_ball_pos`` (position and linear velocity) up to and including the
+state at t = n·0.005 s (the release time = the end of the trajectory); then the robot holds
+q_d(l) with q̇_d = 0 (the authors keep the last desired velocity: an interpretation) for
+``extra_steps`` = 500 more steps while the ball flies. Each step is ``mj_step1`` →
+pin the ball → torque → ``mj_step2``, so the ball takes the hand's *current* position and
+velocity (``mj_step`` followed by pinning, as in the authors' code, lags one step).
+
+**Reward** (A.3.2; the episode return):
+
+* cond. 1, not in the cup, no table contact:
+  −4 − min_t ‖p_c,top − p_b,t‖² − 0.5 ‖p_c,bottom − p_b,T‖² − 10⁻⁴ τ̄
+* cond. 2, not in the cup, table contact: −2 − (the same terms)
+* cond. 3, in the cup: −‖p_c,bottom − p_b,T‖² − 1.5·10⁻⁴ τ̄
+
+⚠ The thesis prints cond. 3 without the minus signs; that would reward a large torque and
+distance, so we use the negated form of the authors' code (in the cup always beats not in
+the cup). τ̄ ("the squared mean torque") is, as in the code, the mean over all simulated
+steps of Σ_j u_j² with u the applied torque including the compensation term. "Table
+contact" follows the thesis: ball contact with the table's geoms (``table``,
+``table_contact_geom``) after release; the authors' code also counts cup and wall contacts.
+"In the cup" (cond. 3 and success) is ball contact with ``cup_base_table_contact`` in the
+final state; the code used any contact during the episode for cond. 3 and the final one for
+success — we use the thesis's single notion. The authors' −500 for "self-collision" (the arm
+hitting the table) is not in the thesis and is left out. An unstable simulation (non-finite
+state or MuJoCo's bad-acceleration warning) returns −30, simulated, unsuccessful (code).
+
+**Validity before simulation** (A.3.2; not simulated, ``executed=False``):
+l < 0.1: −30 − 10 (l − 0.1)²; l > 1.3: −30 − 10 (l − 1.3)²; any q_d outside the joint
+limits j_min = [−2.6, −1.985, −2.8, −0.9, −4.55, −1.5707, −2.7], j_max = [2.6, 1.985, 2.8,
+3.14159, 1.25, 1.5707, 2.7] (the model's ranges): −30. A context outside the box gets
+:meth:`BeerPong.context_penalty` = −30 − d_c² (d_c: Euclidean distance to the box).
+
+**Success**: the ball is in the cup at the end. Info: ``in_cup``, ``table_contact``,
+``min_dist_top`` (min_t ‖p_c,top − p_b,t‖), ``final_dist_bottom`` (‖p_c,bottom − p_b,T‖),
+``release_time`` (s), ``duration`` (l as given), ``torque_cost`` (τ̄). A rejected θ reports
+only ``duration`` (:class:`~vslbook.envs.robot.task.Rollouts` fills NaN for the rest; leaving
+the keys out keeps NaN out of the one-step environment's info, which gymnasium's checker
+compares with ``==``).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+from vslbook.envs.robot.assets import load_model
+from vslbook.envs.robot.primitives import promp_trajectory
+from vslbook.envs.robot.task import Episode, EpisodicTask
+
+MODEL = "beerpong/assets/beerpong_wo_cup.xml"
+MODEL_PATCHES = (("../../meshes/wam/", "./meshes/wam/"),)
+
+DT = 0.005
+Q0 = np.array([0.0, 1.35, 0.0, 1.18, 0.0, -0.786, -1.59])
+P_GAINS = np.array([200.0, 300.0, 100.0, 100.0, 10.0, 10.0, 2.5])
+D_GAINS = 0.5 * np.array([7.0, 15.0, 5.0, 2.5, 0.3, 0.3, 0.05])
+J_MIN = np.array([-2.6, -1.985, -2.8, -0.9, -4.55, -1.5707, -2.7])
+J_MAX = np.array([2.6, 1.985, 2.8, 3.14159, 1.25, 1.5707, 2.7])
+DURATION_BOUNDS = (0.1, 1.3)
+CUP_Z = 0.840
+N_DOF = 7
+N_LEARNED = 2  # learned weights per joint
+N_ZERO = 2  # leading basis functions with weight fixed to zero
+BASIS_WIDTH = 0.1
+WEIGHTS_SCALE = math.sqrt(0.02)
+EXTRA_STEPS = 500
+INVALID_PENALTY = -30.0
+UNSTABLE_PENALTY = -30.0
+TABLE_GEOMS = ("table", "table_contact_geom")
+CUP_FLOOR_GEOM = "cup_base_table_contact"
+
+
+def duration_penalty(duration: float) -> float:
+    """A.3.2's R_θ for a duration outside [0.1, 1.3] s; 0 inside."""
+    lo, hi = DURATION_BOUNDS
+    if duration < lo:
+        return INVALID_PENALTY - 10.0 * (duration - lo) ** 2
+    if duration > hi:
+        return INVALID_PENALTY - 10.0 * (duration - hi) ** 2
+    return 0.0
+
+
+def beer_pong_reward(
+    in_cup: bool,
+    table_contact: bool,
+    min_dist_top: float,
+    final_dist_bottom: float,
+    torque_cost: float,
+) -> float:
+    """The return of an executed episode (A.3.2, cond. 3 with the minus sign, see module doc).
+
+    Args:
+        in_cup: the ball rests in the cup at the end (cond. 3).
+        table_contact: the ball touched the table after release (cond. 2 vs cond. 1).
+        min_dist_top: min_t ‖p_c,top − p_b,t‖ (not squared).
+        final_dist_bottom: ‖p_c,bottom − p_b,T‖ (not squared).
+        torque_cost: τ̄, the mean over steps of Σ_j u_j².
+    """
+    if in_cup:
+        return -(final_dist_bottom**2) - 1.5e-4 * torque_cost
+    offset = -2.0 if table_contact else -4.0
+    return offset - min_dist_top**2 - 0.5 * final_dist_bottom**2 - 1e-4 * torque_cost
+
+
+def desired_trajectory(
+    theta: np.ndarray, weights_scale: float = WEIGHTS_SCALE
+) -> tuple[np.ndarray, np.ndarray]:
+    """``(q_d, q̇_d)``, each ``(n + 1, 7)`` on 0, dt, ..., n·dt with n = round(l / dt).
+
+    ``theta`` must hold a duration inside the bounds (checked by the caller).
+    """
+    n = int(round(float(theta[0]) / DT))
+    w = np.zeros((N_DOF, N_ZERO + N_LEARNED))
+    w[:, N_ZERO:] = np.reshape(theta[1:], (N_DOF, N_LEARNED)) * weights_scale
+    return promp_trajectory(w, n * DT, DT, Q0, width=BASIS_WIDTH)
+
+
+class BeerPong(EpisodicTask):
+    """Beer Pong of Section 3.4 / A.3.2 (see the module docstring for every detail).
+
+    Args:
+        extra_steps: simulation steps after the release (default 500, the authors' code).
+        weights_scale: factor on the learned ProMP weights (default √0.02).
+    """
+
+    name: ClassVar[str] = "beer-pong"
+    context_names: ClassVar[tuple[str, ...]] = ("cup_x", "cup_y")
+    context_low: ClassVar[np.ndarray] = np.array([-0.32, -2.2])
+    context_high: ClassVar[np.ndarray] = np.array([0.32, -1.2])
+    n_params: ClassVar[int] = 1 + N_DOF * N_LEARNED
+    info_keys: ClassVar[tuple[str, ...]] = (
+        "in_cup", "table_contact", "min_dist_top", "final_dist_bottom", "release_time",
+        "duration", "torque_cost",
+    )  # fmt: skip
+    has_success: ClassVar[bool] = True
+
+    def __init__(
+        self, extra_steps: int = EXTRA_STEPS, weights_scale: float = WEIGHTS_SCALE, **kwargs: Any
+    ) -> None:
+        if isinstance(extra_steps, bool) or not isinstance(extra_steps, (int, np.integer)):
+            raise ValueError(f"extra_steps must be an integer >= 1, got {extra_steps!r}")
+        if extra_steps < 1:
+            raise ValueError(f"extra_steps must be an integer >= 1, got {extra_steps!r}")
+        if not (isinstance(weights_scale, (int, float)) and math.isfinite(weights_scale)):
+            raise ValueError(f"weights_scale must be a finite number, got {weights_scale!r}")
+        if weights_scale <= 0:
+            raise ValueError(f"weights_scale must be positive, got {weights_scale!r}")
+        super().__init__(extra_steps=int(extra_steps), weights_scale=float(weights_scale), **kwargs)
+        self.extra_steps = int(extra_steps)
+        self.weights_scale = float(weights_scale)
+        self.model = load_model(MODEL, MODEL_PATCHES)
+        if abs(self.model.opt.timestep - DT) > 1e-12:
+            raise RuntimeError(f"{MODEL}: expected timestep {DT}, got {self.model.opt.timestep}")
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._hand = m.site("init_ball_pos").id
+        self._top = m.site("cup_goal_table").id
+        self._bottom = m.site("cup_goal_final_table").id
+        self._cup = m.body("cup_table").id
+        self._ball_geom = m.geom("ball_geom").id
+        self._table_geoms = np.array([m.geom(g).id for g in TABLE_GEOMS])
+        self._floor_geom = m.geom(CUP_FLOOR_GEOM).id
+        # Box around the table's geoms, grown by the ball radius + 1 cm: contacts with the
+        # table are looked up only while the ball is inside it (the contact list is costly).
+        d0 = mujoco.MjData(m)
+        mujoco.mj_forward(m, d0)
+        ids = self._table_geoms
+        grow = m.geom_size[self._ball_geom, 0] + 0.01
+        self._table_lo = np.min(d0.geom_xpos[ids] - m.geom_size[ids], axis=0) - grow
+        self._table_hi = np.max(d0.geom_xpos[ids] + m.geom_size[ids], axis=0) + grow
+        self._vel = np.zeros(6)
+        self.n_physics_steps = 0  # mj_step1/mj_step2 pairs run by this instance
+        self.ball_path = np.empty((0, 3))  # ball positions of the last executed episode
+        self.torque_path = np.empty((0, N_DOF))  # its applied torques
+
+    # -- contexts -----------------------------------------------------------------------
+    def context_penalty(self, contexts: np.ndarray) -> np.ndarray:
+        """A.3.2's R_c = −30 − d_c², d_c the distance of c to the context box."""
+        c = np.asarray(contexts, dtype=np.float64)
+        excess = np.maximum(self.context_low - c, 0) + np.maximum(c - self.context_high, 0)
+        return INVALID_PENALTY - np.sum(excess**2, axis=-1)
+
+    # -- simulator helpers ----------------------------------------------------------------
+    def reset(self, context: np.ndarray) -> None:
+        """Robot at rest in q0, cup at (c_x, c_y, 0.840), ball on the hand site."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        m.body_pos[self._cup] = (float(context[0]), float(context[1]), CUP_Z)
+        d.qpos[:N_DOF] = Q0
+        mujoco.mj_forward(m, d)
+        d.qpos[7:10] = d.site_xpos[self._hand]
+        mujoco.mj_forward(m, d)
+
+    def cup_sites(self) -> tuple[np.ndarray, np.ndarray]:
+        """(p_c,top, p_c,bottom) of the current model state (after a forward pass)."""
+        return self.data.site_xpos[self._top].copy(), self.data.site_xpos[self._bottom].copy()
+
+    def ball_contacts(self) -> tuple[bool, bool]:
+        """(ball touches the cup floor, ball touches the table) in ``data``'s contact list."""
+        d = self.data
+        if d.ncon == 0:
+            return False, False
+        g = d.contact.geom[: d.ncon]
+        ball = (g == self._ball_geom).any(axis=1)
+        other = np.where(g[:, 0] == self._ball_geom, g[:, 1], g[:, 0])[ball]
+        return bool((other == self._floor_geom).any()), bool(
+            np.isin(other, self._table_geoms).any()
+        )
+
+    # -- episodes -----------------------------------------------------------------------
+    def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
+        theta = np.asarray(theta, dtype=np.float64)
+        context = np.asarray(context, dtype=np.float64)
+        if theta.shape != (self.n_params,) or context.shape != (self.context_dim,):
+            raise ValueError(
+                f"{self.name}: theta must have shape ({self.n_params},) and context "
+                f"({self.context_dim},), got {theta.shape} and {context.shape}"
+            )
+        duration = float(theta[0])
+        pen = duration_penalty(duration)
+        if pen != 0.0:
+            return Episode(pen, False, False, {"duration": duration})
+        q_d, dq_d = desired_trajectory(theta, self.weights_scale)
+        if np.any(q_d < J_MIN) or np.any(q_d > J_MAX):
+            return Episode(INVALID_PENALTY, False, False, {"duration": duration})
+        return self._simulate(q_d, dq_d, context, duration)
+
+    def _simulate(
+        self, q_d: np.ndarray, dq_d: np.ndarray, context: np.ndarray, duration: float
+    ) -> Episode:
+        m, d = self.model, self.data
+        self.reset(context)
+        top, bottom = self.cup_sites()
+        n = len(q_d) - 1
+        n_total = n + self.extra_steps
+        # Precomputed feed-forward part of the PD law: K_p q_d + K_d q̇_d (hold after the end).
+        ff = np.empty((n_total, N_DOF))
+        ff[:n] = P_GAINS * q_d[:n] + D_GAINS * dq_d[:n]
+        ff[n:] = P_GAINS * q_d[n]
+        balls = np.empty((n_total + 1, 3))
+        torques = np.empty((n_total, N_DOF))
+        tmp = np.empty(N_DOF)
+        table_contact = False
+        # Views into MjData (its buffers never move), so the loop allocates nothing.
+        q, dq, bias = d.qpos[:N_DOF], d.qvel[:N_DOF], d.qfrc_bias[:N_DOF]
+        applied, ball_q, ball_dq = d.qfrc_applied[:N_DOF], d.qpos[7:10], d.qvel[7:10]
+        hand_x, hand_v, vel = d.site_xpos[self._hand], self._vel[3:], self._vel
+        step1, step2, objvel = mujoco.mj_step1, mujoco.mj_step2, mujoco.mj_objectVelocity
+        site_type, hand = mujoco.mjtObj.mjOBJ_SITE, self._hand
+        lo, hi = self._table_lo, self._table_hi
+        mul, sub = np.multiply, np.subtract
+        for k in range(n_total):
+            step1(m, d)
+            if k <= n:  # ball held at the hand up to the release time n·dt
+                ball_q[:] = hand_x
+                objvel(m, d, site_type, hand, vel, 0)
+                ball_dq[:] = hand_v
+            elif (
+                not table_contact
+                and d.ncon
+                and lo[0] <= ball_q[0] <= hi[0]
+                and lo[1] <= ball_q[1] <= hi[1]
+                and lo[2] <= ball_q[2] <= hi[2]
+            ):
+                table_contact = self.ball_contacts()[1]
+            balls[k] = ball_q
+            # u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias, with ff = K_p q_d + K_d q̇_d
+            u = torques[k]
+            sub(ff[k], mul(P_GAINS, q, out=tmp), out=u)
+            u -= mul(D_GAINS, dq, out=tmp)
+            u += bias
+            applied[:] = u
+            step2(m, d)
+        torque_sq = float(np.sum(torques**2))
+        self.n_physics_steps += n_total
+        release_time = n * DT
+        if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+            info = {"duration": duration, "release_time": release_time}
+            return Episode(UNSTABLE_PENALTY, False, True, info)
+        mujoco.mj_forward(m, d)  # contacts of the final state
+        balls[n_total] = ball_q
+        self.ball_path = balls  # the ball's positions at 0, dt, ..., T (Fig. 3.2g)
+        self.torque_path = torques  # the applied joint torques u of every step
+        in_cup, last_table = self.ball_contacts()
+        table_contact = table_contact or last_table
+        min_dist_top = float(np.sqrt(np.min(np.sum((balls - top) ** 2, axis=1))))
+        final_dist_bottom = float(np.linalg.norm(balls[-1] - bottom))
+        torque_cost = torque_sq / n_total
+        ret = beer_pong_reward(in_cup, table_contact, min_dist_top, final_dist_bottom, torque_cost)
+        info = {
+            "in_cup": float(in_cup),
+            "table_contact": float(table_contact),
+            "min_dist_top": min_dist_top,
+            "final_dist_bottom": final_dist_bottom,
+            "release_time": release_time,
+            "duration": duration,
+            "torque_cost": torque_cost,
+        }
+        return Episode(float(ret), bool(in_cup), True, info)

@@ -1,0 +1,333 @@
+"""Robot table tennis (thesis Section 4.5.1, Appendix B.4.1; reward shape of Appendix A.3.3).
+
+A 7-DoF Barrett WAM with a bat returns a served ball to a goal on the opponent's side.
+The model is fancy-gym's ``table_tennis/assets/xml/table_tennis_env.xml`` (MIT), read from
+the installed wheel by :func:`vslbook.envs.robot.assets.load_model` (never copied).
+
+Tasks
+    :class:`TableTennis4D` ("TT", B.4.1.1) -- context ``[x_ball0, y_ball0, x_goal, y_goal]``,
+    x_ball0 ∈ [-1, -0.2], y_ball0 ∈ [-0.65, 0.65], x_goal ∈ [-1, -0.2], y_goal ∈ [-0.6, 0.6].
+    :class:`TableTennisHard` ("TT-H", B.4.1.2) -- context
+    ``[x_ball0, y_ball0, v_x, x_goal, y_goal]`` with v_x ∈ [1.5, 4] m/s.
+
+Ball serve
+    The ball's slide joints start at (x_ball0, y_ball0, 1.75) (world z 1.85: the ball body
+    sits 0.1 above its joints' origin) with velocity (v_x, 0, 0.5), v_x = 2.5 in the 4D task,
+    so the ball position maps 1:1 to its landing point on the robot's side. A context is valid
+    (rejection rules of the authors' code, applied with the sampled v_x in the hard task) when,
+    with g = 9.81, z = 1.75 - 0.77 + 0.1, h_net = 0.1, v_z = 0.5,
+    ``t_n = v_z/g + sqrt(v_z²/g² + 2(z - h_net)/g)``: x + v_x t_n >= 0.05 (clears the net);
+    ``t_l = v_z/g + sqrt(v_z²/g² + 2 z/g)``: x + v_x t_l <= 1.1 (lands before the table's end);
+    |y| <= 0.6 (v_y = 0, so y at landing is y_ball0).
+
+Parameters (23) and controller
+    θ = [τ, delay, w (7 joints × 3 basis, joint-major)]: a ProDMP (:class:`ProDMPSpec`, basis
+    alpha 25, phase alpha 3, weights_scale 0.7, auto-scaled basis, goal disabled, i.e. the
+    attractor is the start posture) with learned duration τ ∈ [0.56, 1.5] s and start time
+    delay ∈ [0.05, 0.6] s (Di-SkilL's bounds). The robot starts at q0 = [0, 0, 0, 1.5, 0, 0, 1.5]
+    at rest. Control step k (dt = 0.002 × 4 = 0.008 s, at most 350 steps = 2.8 s) applies
+    ``u = clip(K_p (q_d[k] - q) + K_d (q̇_d[k] - q̇), -1, 1)`` to the motors (gears
+    150, 125, 40, 60, 5, 5, 2), held for the 4 physics sub-steps; K_p = 0.5·[1, 4, 2, 4, 1, 4, 1],
+    K_d = 0.1·K_p; no gravity compensation.
+
+Validity (before simulation)
+    θ is rejected (not simulated, ``executed=False``) if τ or the delay lie outside their
+    bounds or q_d leaves the joint limits low = [-2.6, -2.0, -2.8, -0.9, -4.8, -1.6, -2.2],
+    high = [2.6, 2.0, 2.8, 3.1, 1.3, 1.6, 2.2]. Penalty:
+    ``-(3 Δτ + 3 Δdelay + mean(max(q_d - high, 0)) + mean(max(low - q_d, 0)))`` (authors' code).
+    Interpretation: the thesis's r_traj (B.4.1.1) = -Σ(|τ^d_ij| - |q^b_j|) over entries with
+    |τ^d_ij| > |q^b_j| compares magnitudes with the *upper* bound only, which is not a joint
+    limit test for the asymmetric limits (joint 4: [-0.9, 3.1]; joint 5: [-4.8, 1.3]) and has
+    no term for τ or the delay, so it is not well defined here; the code's penalty is used.
+
+Episode and termination (checked after every physics sub-step)
+    The episode ends after 350 control steps; when the ball touches the floor before any
+    racket contact; after the first racket contact (``bat`` or ``bat_back``), at the ball's
+    first contact with the table or the floor. The landing point is the ball's position at
+    that contact. If MuJoCo flags the simulation as unstable (bad accelerations) the episode
+    ends with return -25.
+
+Reward (only at the end; A.3.3, = B.4.1.1's f2..f5), with d_r = min_t ‖b_t - r_t‖ (ball centre
+to bat centre over all sub-steps), g = goal:
+    no racket contact:              0.2 (1 - tanh(d_r²))
+    hit, no landing on the table:   2 (1 - tanh(d_r²)) + (1 - tanh(min_t ‖b_t,xy - g‖²))
+    hit, then landed on the table:  2 (1 - tanh(d_r²)) + 4 (1 - tanh(‖b_land,xy - g‖²))
+                                    + 1[x_land < 0]
+    Interpretation: both thesis versions (A.3.3 cond. 3, B.4.1.1 cond. 4) say "table contact"
+    for the landing case; the authors' code also scores a first *floor* contact after the hit
+    as a landing. The thesis is followed by default (a floor contact after the hit gets the
+    "no landing" term); ``floor_counts_as_landing=True`` gives the code's rule.
+
+Success: the returned ball lands on the table at x < 0 (opponent's side) and
+‖landing_xy - goal‖ < 0.2.
+
+Other places where the thesis was followed over the code or had to be interpreted
+    * Goal y ∈ [-0.6, 0.6] as in B.4.1.1 (the code samples ±0.65).
+    * The episode stops at the sub-step of the terminating contact (the code finishes the
+      control step's remaining sub-steps; only the recorded trajectories differ).
+    * Out-of-range contexts (SVSL's punishment, B.4.1.1 and A.3.3): -20 d_c², d_c the distance
+      to the valid set (box, and the x/|y| interval the serve rules allow for the context's
+      v_x, clipped into its range).
+    * The trajectory grid is 0, dt, ..., 2.8 s; step k tracks the grid point at k·dt.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+from vslbook.envs.robot.assets import load_model
+from vslbook.envs.robot.primitives import ProDMPSpec, joint_limit_excess
+from vslbook.envs.robot.task import Episode, EpisodicTask
+
+MODEL = "table_tennis/assets/xml/table_tennis_env.xml"
+TIMESTEP, FRAME_SKIP, MAX_STEPS = 0.002, 4, 350
+DT = TIMESTEP * FRAME_SKIP
+Q0 = np.array([0.0, 0.0, 0.0, 1.5, 0.0, 0.0, 1.5])
+JOINT_LOW = np.array([-2.6, -2.0, -2.8, -0.9, -4.8, -1.6, -2.2])
+JOINT_HIGH = np.array([2.6, 2.0, 2.8, 3.1, 1.3, 1.6, 2.2])
+KP = 0.5 * np.array([1.0, 4.0, 2.0, 4.0, 1.0, 4.0, 1.0])
+KD = 0.1 * KP
+TAU_BOUNDS, DELAY_BOUNDS = (0.56, 1.5), (0.05, 0.6)
+BALL_Z0, BALL_VZ, BALL_VX_4D = 1.75, 0.5, 2.5
+GRAVITY, TABLE_HEIGHT, NET_HEIGHT, TABLE_X_END, TABLE_Y_HALF = 9.81, 0.77, 0.1, 1.1, 0.6
+UNSTABLE_RETURN = -25.0
+SUCCESS_RADIUS = 0.2
+
+SPEC = ProDMPSpec(
+    n_dof=7, n_basis=3, dt=DT, duration=MAX_STEPS * DT, alpha=25.0, alpha_phase=3.0,
+    tau_bounds=TAU_BOUNDS, delay_bounds=DELAY_BOUNDS, goal="disabled", weights_scale=0.7,
+)  # fmt: skip
+
+
+def serve_x_interval(v_x: np.ndarray | float) -> tuple[np.ndarray, np.ndarray]:
+    """The initial ball x for which a serve with speed ``v_x`` clears the net and lands
+    before the table's end: ``(x_min, x_max)`` (the serve rules of the module docstring)."""
+    v_x = np.asarray(v_x, dtype=np.float64)
+    z = BALL_Z0 - TABLE_HEIGHT + 0.1
+    a = BALL_VZ / GRAVITY
+    t_net = a + math.sqrt(a * a + 2.0 * (z - NET_HEIGHT) / GRAVITY)
+    t_land = a + math.sqrt(a * a + 2.0 * z / GRAVITY)
+    return 0.05 - v_x * t_net, TABLE_X_END - v_x * t_land
+
+
+def serve_valid(x: np.ndarray, y: np.ndarray, v_x: np.ndarray) -> np.ndarray:
+    """Mask of initial ball states (x, y, v_x) that pass the serve rules."""
+    lo, hi = serve_x_interval(v_x)
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    return (x >= lo) & (x <= hi) & (np.abs(y) <= TABLE_Y_HALF) & (np.asarray(v_x) >= 0)
+
+
+def staged_reward(
+    ball: np.ndarray, racket: np.ndarray, goal: np.ndarray, hit: bool, landing: np.ndarray | None
+) -> float:
+    """The staged return of the module docstring (A.3.3).
+
+    Args:
+        ball, racket: ``(T, 3)`` ball centre and bat centre at every simulated sub-step.
+        goal: ``(2,)`` desired landing point.
+        hit: whether the ball touched the bat.
+        landing: ``(≥2,)`` position of the landing that counts (None: no landing).
+    """
+    ball = np.asarray(ball, dtype=np.float64).reshape(-1, 3)
+    racket = np.asarray(racket, dtype=np.float64).reshape(-1, 3)
+    if len(ball) == 0 or ball.shape != racket.shape:
+        raise ValueError(
+            f"ball and racket must be equal (T>0, 3) arrays: {ball.shape}, {racket.shape}"
+        )
+    goal = np.asarray(goal, dtype=np.float64)[:2]
+    near = 1.0 - math.tanh(float(np.min(np.sum((ball - racket) ** 2, axis=1))))
+    if not hit:
+        return 0.2 * near
+    if landing is None:
+        closest = float(np.min(np.sum((ball[:, :2] - goal) ** 2, axis=1)))
+        return 2.0 * near + (1.0 - math.tanh(closest))
+    land = np.asarray(landing, dtype=np.float64)[:2]
+    err = float(np.sum((land - goal) ** 2))
+    return 2.0 * near + 4.0 * (1.0 - math.tanh(err)) + float(land[0] < 0.0)
+
+
+def trajectory_penalty(theta: np.ndarray, q_d: np.ndarray) -> float:
+    """0 for a valid θ, else the (negative) penalty of the module docstring."""
+    d_tau, d_delay = SPEC.bound_excess(theta)
+    high, low = joint_limit_excess(q_d, JOINT_LOW, JOINT_HIGH)
+    invalid = d_tau > 0 or d_delay > 0 or np.any(q_d > JOINT_HIGH) or np.any(q_d < JOINT_LOW)
+    return -(3.0 * d_tau + 3.0 * d_delay + high + low) if invalid else 0.0
+
+
+class TableTennis4D(EpisodicTask):
+    """Table tennis with a 4D context (ball start x/y, goal x/y); see the module docstring."""
+
+    name: ClassVar[str] = "table-tennis-4d"
+    context_names: ClassVar[tuple[str, ...]] = ("x_ball0", "y_ball0", "x_goal", "y_goal")
+    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, -1.0, -0.6])
+    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, -0.2, 0.6])
+    n_params: ClassVar[int] = SPEC.n_params
+    info_keys: ClassVar[tuple[str, ...]] = (
+        "hit", "landed", "landing_x", "landing_y", "landing_dist", "min_ball_racket_dist",
+        "unstable", "steps",
+    )  # fmt: skip
+    has_success: ClassVar[bool] = True
+    spec: ClassVar[ProDMPSpec] = SPEC
+
+    def __init__(self, floor_counts_as_landing: bool = False, **kwargs: Any) -> None:
+        super().__init__(floor_counts_as_landing=floor_counts_as_landing, **kwargs)
+        if not isinstance(floor_counts_as_landing, bool):
+            raise TypeError("floor_counts_as_landing must be a bool")
+        self.floor_counts_as_landing = floor_counts_as_landing
+        self.model = load_model(MODEL)
+        if not math.isclose(self.model.opt.timestep, TIMESTEP):
+            raise RuntimeError(f"unexpected model timestep {self.model.opt.timestep}")
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+
+        def gid(name: str) -> int:
+            return mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, name)
+
+        self._ball_geom = gid("target_ball_contact")
+        self._bat_geoms = (gid("bat"), gid("bat_back"))
+        self._floor, self._table = gid("floor"), gid("table_tennis_table")
+        self._ball_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "target_ball")
+        # The bat geom sits at the origin of its body "EE": its centre is that body's xpos.
+        self._bat_body = int(m.geom_bodyid[self._bat_geoms[0]])
+        assert np.allclose(m.geom_pos[self._bat_geoms[0]], 0.0)
+        self._goal_body = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "target_point")
+        self._ball_qadr = int(
+            m.jnt_qposadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, "tar_x")]
+        )
+        if not (
+            np.all(m.actuator_ctrllimited[:7])
+            and np.allclose(m.actuator_ctrlrange[:7], [-1.0, 1.0])
+            and not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CLAMPCTRL
+        ):
+            raise RuntimeError("the model's motors must clamp ctrl to [-1, 1]")
+        self.sim_steps = 0  # physics sub-steps taken by this instance (tests and benchmarks)
+
+    # -- contexts -----------------------------------------------------------------------
+    def serve(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, y, v_x)`` columns of the initial ball state for contexts ``(n, d)``."""
+        c = np.atleast_2d(np.asarray(context, dtype=np.float64))
+        return c[:, 0], c[:, 1], np.full(len(c), BALL_VX_4D)
+
+    def goal(self, context: np.ndarray) -> np.ndarray:
+        return np.asarray(context, dtype=np.float64)[..., -2:]
+
+    def context_valid(self, contexts: np.ndarray) -> np.ndarray:
+        c = np.atleast_2d(np.asarray(contexts, dtype=np.float64))
+        ok = super().context_valid(c) & serve_valid(*self.serve(c))
+        return ok if np.ndim(contexts) > 1 else ok.reshape(np.shape(contexts)[:-1])
+
+    def context_penalty(self, contexts: np.ndarray) -> np.ndarray:
+        c = np.atleast_2d(np.asarray(contexts, dtype=np.float64))
+        excess = np.maximum(self.context_low - c, 0) + np.maximum(c - self.context_high, 0)
+        x, y, v_x = self.serve(c)
+        lo, hi = serve_x_interval(np.clip(v_x, 1.5, 4.0))
+        serve = np.maximum(lo - x, 0) + np.maximum(x - hi, 0)
+        serve_y = np.maximum(np.abs(y) - TABLE_Y_HALF, 0)
+        d2 = np.sum(excess**2, axis=-1) + serve**2 + serve_y**2
+        out = -20.0 * d2
+        return out if np.ndim(contexts) > 1 else out.reshape(np.shape(contexts)[:-1])
+
+    def describe_contexts(self) -> str:
+        return (
+            super().describe_contexts()
+            + "; the serve must clear the net, land before x = 1.1 and keep |y| <= 0.6"
+        )
+
+    # -- episodes -----------------------------------------------------------------------
+    def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
+        theta = np.asarray(theta, dtype=np.float64).reshape(self.n_params)
+        context = np.asarray(context, dtype=np.float64).reshape(self.context_dim)
+        q_d, dq_d = self.spec.trajectory(theta, Q0)
+        penalty = trajectory_penalty(theta, q_d)
+        if penalty < 0:
+            return Episode(penalty, False, False, dict.fromkeys(self.info_keys, math.nan))
+        x, y, v_x = (float(a[0]) for a in self.serve(context))
+        return self.simulate(q_d, dq_d, np.array([x, y, v_x]), self.goal(context))
+
+    def simulate(
+        self, q_d: np.ndarray, dq_d: np.ndarray, ball0: np.ndarray, goal: np.ndarray
+    ) -> Episode:
+        """Track ``(q_d, q̇_d)`` ``(≥350, 7)`` with the ball served from ``ball0`` = (x, y, v_x)."""
+        m, d = self.model, self.data
+        mujoco.mj_resetData(m, d)
+        m.body_pos[self._goal_body] = [goal[0], goal[1], TABLE_HEIGHT]
+        d.qpos[:7] = Q0
+        a = self._ball_qadr
+        d.qpos[a : a + 3] = [ball0[0], ball0[1], BALL_Z0]
+        d.qvel[a : a + 3] = [ball0[2], 0.0, BALL_VZ]
+        mujoco.mj_forward(m, d)
+
+        n_sub = MAX_STEPS * FRAME_SKIP
+        xs = np.empty((n_sub, m.nbody, 3))
+        xpos, qpos, qvel, ctrl = d.xpos, d.qpos, d.qvel, d.ctrl
+        warnings, bad = d.warning.number, int(mujoco.mjtWarning.mjWARN_BADQACC)
+        # u = K_p q_d + K_d q̇_d - K_p q - K_d q̇; the clip to [-1, 1] is MuJoCo's own ctrl
+        # clamping (ctrlrange of the motors, checked in __init__).
+        feedforward = KP * q_d[:MAX_STEPS] + KD * dq_d[:MAX_STEPS]
+        ball_geom, bats = self._ball_geom, self._bat_geoms
+        floor, table = self._floor, self._table
+        hit = unstable = done = False
+        landing: np.ndarray | None = None
+        landed_on_table = False
+        i = k = 0
+        for k in range(MAX_STEPS):
+            ctrl[:] = feedforward[k] - KP * qpos[:7] - KD * qvel[:7]
+            for _ in range(FRAME_SKIP):
+                mujoco.mj_step(m, d)
+                xs[i] = xpos
+                i += 1
+                if d.ncon:
+                    pairs = d.contact.geom[: d.ncon]
+                    rows = pairs[(pairs == ball_geom).any(axis=1)]
+                    others = set(rows.ravel().tolist()) - {ball_geom}
+                    if not hit:
+                        hit = bool(others & set(bats))
+                        if not hit and floor in others:
+                            done = True
+                    if hit and landing is None:
+                        if floor in others or table in others:
+                            landing = d.geom_xpos[ball_geom].copy()
+                            landed_on_table = floor not in others
+                            done = True
+                if done:
+                    break
+            if warnings[bad] > 0:  # MuJoCo reset the state after a divergence
+                unstable = True
+            if done or unstable:
+                break
+        self.sim_steps += i
+        ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
+        counted = landing if landed_on_table or self.floor_counts_as_landing else None
+        dist = float(np.linalg.norm(landing[:2] - goal)) if landing is not None else math.nan
+        ret = UNSTABLE_RETURN if unstable else staged_reward(ball, racket, goal, hit, counted)
+        success = bool(
+            not unstable and landed_on_table and landing[0] < 0.0 and dist < SUCCESS_RADIUS
+        )
+        info = {
+            "hit": float(hit),
+            "landed": float(landed_on_table),
+            "landing_x": float(landing[0]) if landing is not None else math.nan,
+            "landing_y": float(landing[1]) if landing is not None else math.nan,
+            "landing_dist": dist,
+            "min_ball_racket_dist": float(np.sqrt(np.min(np.sum((ball - racket) ** 2, axis=1)))),
+            "unstable": float(unstable),
+            "steps": float(k + 1),
+        }
+        return Episode(float(ret), success, True, info)
+
+
+class TableTennisHard(TableTennis4D):
+    """Table Tennis Hard (B.4.1.2): the context adds the serve speed v_x ∈ [1.5, 4] m/s."""
+
+    name: ClassVar[str] = "table-tennis-hard"
+    context_names: ClassVar[tuple[str, ...]] = ("x_ball0", "y_ball0", "v_x", "x_goal", "y_goal")
+    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, 1.5, -1.0, -0.6])
+    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, 4.0, -0.2, 0.6])
+
+    def serve(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        c = np.atleast_2d(np.asarray(context, dtype=np.float64))
+        return c[:, 0], c[:, 1], c[:, 2]
