@@ -238,16 +238,7 @@ class PlanarReacherTask(EpisodicTask):
         this process, and that with ``out_of_range="penalise"`` a context outside C is still
         evaluated, with l_c = 10 subtracted (A.3.1), and counts as executed.
         """
-        if out_of_range not in ("error", "penalise"):
-            raise ValueError(f"out_of_range must be 'error' or 'penalise', got {out_of_range!r}")
-        c = self.check_contexts(contexts, allow_invalid=out_of_range == "penalise")
-        th = self.check_theta(theta)
-        if len(th) == 1 and len(c) > 1:
-            th = np.repeat(th, len(c), axis=0)
-        if len(c) == 1 and len(th) > 1:
-            c = np.repeat(c, len(th), axis=0)
-        if len(th) != len(c):
-            raise ValueError(f"{self.name}: {len(th)} parameter vectors for {len(c)} contexts")
+        th, c = self.check_batch(theta, contexts, out_of_range)
         n_workers = 1 if workers is None else resolve_workers(workers)
         if n_workers > 1 and len(th) > 1:
             return Rollouts.from_episodes(self._run(th, c, n_workers), self.info_keys)

@@ -213,16 +213,7 @@ class EpisodicTask:
                 ``"penalise"``: such episodes get :meth:`context_penalty` and are not
                 simulated (SVSL's punishment, Algorithm 1).
         """
-        if out_of_range not in ("error", "penalise"):
-            raise ValueError(f"out_of_range must be 'error' or 'penalise', got {out_of_range!r}")
-        c = self.check_contexts(contexts, allow_invalid=out_of_range == "penalise")
-        th = self.check_theta(theta)
-        if len(th) == 1 and len(c) > 1:
-            th = np.repeat(th, len(c), axis=0)
-        if len(c) == 1 and len(th) > 1:
-            c = np.repeat(c, len(th), axis=0)
-        if len(th) != len(c):
-            raise ValueError(f"{self.name}: {len(th)} parameter vectors for {len(c)} contexts")
+        th, c = self.check_batch(theta, contexts, out_of_range)
         valid = self.context_valid(c)
         episodes: list[Episode | None] = [None] * len(c)
         for i in np.flatnonzero(~valid):
@@ -233,6 +224,22 @@ class EpisodicTask:
             for i, ep in zip(idx, self._run(th[idx], c[idx], workers), strict=True):
                 episodes[i] = ep
         return Rollouts.from_episodes(episodes, self.info_keys)  # type: ignore[arg-type]
+
+    def check_batch(
+        self, theta: Any, contexts: Any, out_of_range: str = "error"
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Checked ``(θ (n, n_params), c (n, d))``, a single θ or c broadcast to the other."""
+        if out_of_range not in ("error", "penalise"):
+            raise ValueError(f"out_of_range must be 'error' or 'penalise', got {out_of_range!r}")
+        c = self.check_contexts(contexts, allow_invalid=out_of_range == "penalise")
+        th = self.check_theta(theta)
+        if len(th) == 1 and len(c) > 1:
+            th = np.repeat(th, len(c), axis=0)
+        if len(c) == 1 and len(th) > 1:
+            c = np.repeat(c, len(th), axis=0)
+        if len(th) != len(c):
+            raise ValueError(f"{self.name}: {len(th)} parameter vectors for {len(c)} contexts")
+        return th, c
 
     def _run(self, theta: np.ndarray, contexts: np.ndarray, workers: int | None) -> list[Episode]:
         n_workers = resolve_workers(workers)
