@@ -133,6 +133,8 @@ def test_finished_run_is_reused_only_by_the_same_code(tmp_path, capsys):
 
     fresh = run("dime", ENV, 0, "smoke", **kwargs)
     assert fresh.path == first.path and fresh.done and fresh.code_matches
+    # the re-run records the algorithm's code scope like any new run
+    assert fresh.env["code_excluded"] == sorted(("erl/", "envs/robot/"))
     moved = list((tmp_path / "_stale").iterdir())
     assert len(moved) == 1 and RunDir.open(moved[0]).code_hash == "0" * 64
     assert "moved to" in capsys.readouterr().out

@@ -73,7 +73,7 @@ def run(
     }
     rd = RunDir.create(root, record, code_exclude=spec.independent_of)
     if not rd.code_matches:  # only an existing directory can have been made by other code
-        rd = _stale(rd, root, record, reuse_stale)
+        rd = _stale(rd, root, record, reuse_stale, spec.independent_of)
     if rd.failed:
         warnings.warn(
             f"run {rd.name} diverged before ({rd.failure.get('message')}); not re-run. "
@@ -103,8 +103,11 @@ def _reuse_from_env() -> bool:
     return os.environ.get(REUSE_STALE_ENV, "").strip().lower() in ("1", "true", "yes")
 
 
-def _stale(rd: RunDir, root: str | Path, record: dict, reuse_stale: bool | None) -> RunDir:
-    """Handle a run directory made by other code: reuse it (warning) or move it aside."""
+def _stale(
+    rd: RunDir, root: str | Path, record: dict, reuse_stale: bool | None, exclude: tuple[str, ...]
+) -> RunDir:
+    """Handle a run directory made by other code: reuse it (warning) or move it aside and
+    start afresh (recording the algorithm's code scope ``exclude``, as a new run does)."""
     old = (rd.code_hash or "unknown")[:12]
     new = code_fingerprint(tuple(rd.env.get("code_excluded", ())))[:12]
     what = f"run {rd.name} ({rd.status}) was made by other code (code hash {old}, now {new})"
@@ -115,4 +118,4 @@ def _stale(rd: RunDir, root: str | Path, record: dict, reuse_stale: bool | None)
     target.parent.mkdir(parents=True, exist_ok=True)
     shutil.move(str(rd.path), str(target))
     print(f"{what}; moved to {target} and starting afresh")
-    return RunDir.create(root, record)
+    return RunDir.create(root, record, code_exclude=exclude)
