@@ -1,0 +1,175 @@
+"""SVSL (Algorithm 1) on the planar reacher: schedule, bounds, determinism, resume, learning."""
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from vslbook.envs.robot import make_task
+from vslbook.erl.svsl import SVSL, run, svsl_config, train
+from vslbook.results import RunDir
+
+
+def _tiny(**kw):
+    base = dict(
+        n_experts=3, iterations_per_expert=6, fine_tune_every=3, weight_iterations=4,
+        test_every=3, test_contexts=20,
+    )  # fmt: skip
+    return svsl_config("planar-reacher", **(base | kw))
+
+
+@pytest.fixture(scope="module")
+def task():
+    return make_task("planar-reacher")
+
+
+def _gauss_kl(m1, s1, m0, s0):
+    """KL(N(m1, s1) ‖ N(m0, s0)), written out here."""
+    d = len(m1)
+    s0i = np.linalg.inv(s0)
+    diff = m0 - m1
+    return 0.5 * (
+        np.trace(s0i @ s1) + diff @ s0i @ diff - d
+        + np.linalg.slogdet(s0)[1] - np.linalg.slogdet(s1)[1]
+    )  # fmt: skip
+
+
+def test_schedule_follows_algorithm_1(task, monkeypatch):
+    cfg = _tiny()
+    sizes = []
+    orig = SVSL.update_experts
+
+    def spy(self, experts):
+        sizes.append((self.iteration, len(experts), int(experts[-1])))
+        return orig(self, experts)
+
+    monkeypatch.setattr(SVSL, "update_experts", spy)
+    s = train(task, cfg, seed=0)
+    # N·K adding iterations; every H-th iteration of each expert updates all of them
+    assert len(sizes) == cfg.n_experts * cfg.iterations_per_expert
+    for t, n, last in sizes:
+        k, i = divmod(t, cfg.iterations_per_expert)
+        assert last == k  # the newest expert is always among the updated ones
+        assert n == (k + 1 if (i + 1) % cfg.fine_tune_every == 0 else 1)
+    assert s.iteration == cfg.total_iterations
+    w = np.exp(s.model.log_w)
+    assert w.sum() == pytest.approx(1.0)
+    assert s.model.n_experts <= cfg.n_experts
+
+
+def test_updates_respect_their_kl_bounds(task):
+    cfg = _tiny(kl_expert=0.05, kl_context=0.02)
+    s = train(task, cfg, seed=1, until=2)
+    m = s.model
+    old = m.arrays()
+    e = np.array([0])
+    s.update_experts(e)
+    c = s.buffers.c[0]  # the contexts the expected KL is taken over
+    kls = [
+        _gauss_kl(m.gain[0] @ ci + m.offset[0], m.cov[0],
+                  old["gain"][0] @ ci + old["offset"][0], old["cov"][0])
+        for ci in c
+    ]  # fmt: skip
+    assert 0 < np.mean(kls) <= cfg.kl_expert * 1.01
+    s.update_contexts(e)
+    kl = _gauss_kl(m.ctx_mean[0], m.ctx_cov[0], old["ctx_mean"][0], old["ctx_cov"][0])
+    assert 0 < kl <= cfg.kl_context * 1.01
+
+
+def test_responsibilities_switch(task):
+    s = train(task, _tiny(), seed=2, until=14)  # three experts exist
+    e = np.arange(s.model.n_experts)
+    with_resp = s.expert_targets(e)
+    assert not np.allclose(with_resp, s.buffers.ret[e])
+    s.config = replace(s.config, responsibilities=False)
+    np.testing.assert_array_equal(s.expert_targets(e), s.buffers.ret[e])
+    h = s.model.expert_entropy()[:, None]
+    np.testing.assert_allclose(s.context_targets(e), s.buffers.ret[e] + s.config.alpha * h)
+
+
+def test_responsibility_terms_are_bayes_rule(task):
+    s = train(task, _tiny(), seed=3, until=14)
+    m = s.model
+    c, th = s.buffers.c[1][:5], s.buffers.theta[1][:5]
+    log_resp, log_gate = m.log_responsibilities(c, th)
+    # by hand: Gaussian densities of every factor
+    from scipy.stats import multivariate_normal as mvn
+
+    w = np.exp(m.log_w)
+    pc = np.stack([mvn(m.ctx_mean[o], m.ctx_cov[o]).pdf(c) for o in range(m.n_experts)], 1)
+    pt = np.stack(
+        [[mvn(m.gain[o] @ ci + m.offset[o], m.cov[o]).pdf(ti) for ci, ti in zip(c, th, strict=True)]
+         for o in range(m.n_experts)], 1,
+    )  # fmt: skip
+    gate = pc * w / (pc * w).sum(1, keepdims=True)
+    resp = pt * gate / (pt * gate).sum(1, keepdims=True)
+    np.testing.assert_allclose(np.exp(log_gate), gate, rtol=1e-8)
+    np.testing.assert_allclose(np.exp(log_resp), resp, rtol=1e-6, atol=1e-300)
+
+
+def test_deterministic_and_resumes_exactly(task):
+    cfg = _tiny()
+    rows_a, rows_b = [], []
+    a = train(task, cfg, seed=4, callback=lambda i, m: rows_a.append((i, m)))
+    half = train(task, cfg, seed=4, until=11, callback=lambda i, m: rows_b.append((i, m)))
+    state = half.state_dict()
+    fresh = SVSL(task, cfg, 4)
+    fresh.load_state_dict(state)
+    b = train(task, cfg, seed=4, state=fresh, callback=lambda i, m: rows_b.append((i, m)))
+
+    def strip(rows):
+        return [(i, {k: v for k, v in m.items() if k != "iteration_seconds"}) for i, m in rows]
+
+    assert strip(rows_a) == strip(rows_b)
+    for k, v in a.model.arrays().items():
+        np.testing.assert_array_equal(v, b.model.arrays()[k])
+
+
+def test_run_directory_resumes(tmp_path):
+    cfg = _tiny()
+    full = RunDir(run("planar-reacher", cfg, 5, tmp_path / "a", checkpoint_every=5))
+    # an interrupted run: only the first 12 iterations, checkpointed at 10, then resumed
+    from vslbook.erl import svsl as mod
+
+    task = make_task("planar-reacher")
+    rd = RunDir.create(
+        tmp_path / "b",
+        {"algo": "svsl", "env": "planar-reacher", "task_kwargs": {}, "seed": 5}
+        | __import__("dataclasses").asdict(cfg),
+        code_exclude=("srl/",),
+    )
+    mod.train(
+        task, cfg, 5, until=12, callback=lambda i, m: rd.log(i, **m),
+        checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}), checkpoint_every=5,
+    )  # fmt: skip
+    resumed = RunDir(run("planar-reacher", cfg, 5, tmp_path / "b", checkpoint_every=5))
+    assert resumed.done and full.done
+
+    def rows(r):
+        return [{k: v for k, v in m.items() if k != "iteration_seconds"} for m in r.metrics()]
+
+    assert rows(resumed) == rows(full)
+
+
+@pytest.mark.slow
+def test_svsl_learns_the_planar_reacher(task):
+    """Test return of the mixture rises well above the initial one (seed 0)."""
+    cfg = _tiny(n_experts=2, iterations_per_expert=60, fine_tune_every=20, weight_iterations=0,
+                test_every=10)  # fmt: skip
+    rows = []
+    train(task, cfg, seed=0, callback=lambda i, m: rows.append(m))
+    tests = [m["test_return"] for m in rows if "test_return" in m]
+    assert tests[-1] > tests[0] + 20, tests
+
+
+def test_bad_configuration(task):
+    with pytest.raises(ValueError, match="no SVSL configuration"):
+        svsl_config("cartpole")
+    with pytest.raises(ValueError, match="reward"):
+        svsl_config("reacher5-ch3", reward="3.7")
+    with pytest.raises(ValueError, match="alpha"):
+        svsl_config("planar-reacher", alpha=-1.0)
+    with pytest.raises(ValueError, match="context_init_cov"):
+        SVSL(task, svsl_config("planar-reacher", context_init_cov=(1.0,)), 0)
+    with pytest.raises(ValueError, match="buffer_size"):
+        svsl_config("planar-reacher", buffer_size=10)
