@@ -1,9 +1,10 @@
 """LaDiPS: layered direct policy search (End, Akrour, Peters, Neumann 2017).
 
 The second Chapter 3 baseline (Section 3.2; Section 3.4.2; hyper-parameters Table A.3). The
-policy is the same contextual mixture as :mod:`vslbook.erl.hireps` (N linear-Gaussian experts
-π(θ|c,o) = N(K_o c + k_o, Σ_o), Bayes gating π(o|c) ∝ π(o) N(c|μ_o, S_o), the task's fixed
-p(c), all N experts from the start), but the layers are updated separately:
+policy is the same contextual mixture as HiREPS (:mod:`vslbook.erl.mixture_baseline`: N
+linear-Gaussian experts π(θ|c,o) = N(K_o c + k_o, Σ_o), Bayes gating π(o|c) ∝ π(o) N(c|μ_o,
+S_o), the task's fixed p(c), all N experts from the start), but the layers are updated
+separately:
 
 1. **Experts** (lower layer): each expert by contextual MORE (Eq. 3.5 without the SVSL
    reward augmentation; :func:`vslbook.erl.more.cmore_update`) on a quadratic surrogate of
@@ -30,7 +31,7 @@ p(c), all N experts from the start), but the layers are updated separately:
    ∂g/∂η = ε_gating − E KL, ∂g/∂ω = E H − α. Q(c,o) = E[R | c, o] is a weighted
    least-squares fit of the returns on quadratic context features with the responsibilities
    of o as weights. The new π(o|c_i) are then projected on the Bayes gating by weighted ML
-   (:func:`vslbook.erl.hireps.fit_gating` with weights π_new(o|c_i)/n).
+   (:func:`vslbook.erl.mixture_baseline.fit_gating` with weights π_new(o|c_i)/n).
 
 α = log 30 (Table A.3) is the lower bound on the gating's entropy ("the entropy of the gating
 is lower bounded with a constant value", Section 3.2): log 30 nats is the entropy of a
@@ -59,7 +60,7 @@ import numpy as np
 from scipy.optimize import minimize
 from scipy.special import logsumexp
 
-from vslbook.erl.hireps import (
+from vslbook.erl.mixture_baseline import (
     MixtureAlgorithm,
     context_features,
     effective_sample_size,

@@ -1,0 +1,217 @@
+"""Fig. 3.1: SVSL with and without the responsibilities, and HiREPS, on the planar reacher.
+
+The thesis (Section 3.4.1) trains the 10-link planar reacher with 60 experts (K = 350,
+H = 50) for (i) SVSL as derived, (ii) SVSL with log π̃(o | c, θ) and log π̃(o | c) set to
+zero, and HiREPS, over 15 seeds, and shows for six contexts the means of the experts that
+100 draws from π(o | c) pick (Fig. 3.1a, d, e) and the per-expert context distributions
+(Fig. 3.1c, f). Its reported outcome: with the responsibilities the solutions are versatile
+(several experts per context), precise and valid, and the context distributions cover the
+whole context space; without them the solutions are imprecise, partly go through the
+obstacles and the context distributions crowd into easy regions; HiREPS chose only 3 of its
+60 experts.
+
+:func:`planar_counts` gives the counts per budget (a budget scales the number of experts,
+iterations and seeds; α, β, the KL bounds and K stay the thesis's), :func:`run_planar`
+trains one variant for one seed in a run directory (resumable), :func:`planar_scores`
+measures precision, validity and versatility of a trained model, and the ``draw_*``
+functions make the panels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import matplotlib.pyplot as plt
+import numpy as np
+from matplotlib.patches import Ellipse, Rectangle
+
+from vslbook.budget import Budget, get_budget
+from vslbook.envs.robot import make_task
+from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points
+from vslbook.erl import hireps
+from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config
+from vslbook.erl.svsl import run as run_svsl
+from vslbook.results import RunDir
+
+__all__ = [
+    "FIG_CONTEXTS",
+    "VARIANTS",
+    "draw_context_coverage",
+    "draw_solutions",
+    "load_model",
+    "planar_counts",
+    "planar_scores",
+    "run_planar",
+]
+
+#: The six target contexts drawn in Fig. 3.1. The thesis does not list their coordinates;
+#: these spread over the context box [4.5, 7] × [−6, 6] as the figure's red dots do.
+FIG_CONTEXTS = np.array([[5.0, 4.5], [6.5, 3.0], [5.5, 1.0], [6.5, -1.0], [5.0, -3.0], [6.5, -5.0]])
+
+#: The three methods of Fig. 3.1, in the order of its panels.
+VARIANTS = ("SVSL", "SVSL, no responsibilities", "HiREPS")
+
+
+def planar_counts(budget: Budget | str | None = None) -> dict[str, int]:
+    """Experts, iterations and seeds of Fig. 3.1 at a budget (full: the thesis's)."""
+    b = get_budget(budget)
+    return {
+        "n_experts": b.pick(smoke=2, reduced=12, full=60),
+        "iterations_per_expert": b.pick(smoke=50, reduced=350, full=350),
+        "weight_iterations": b.pick(smoke=10, reduced=100, full=100),
+        "hireps_iterations": b.pick(smoke=20, reduced=600, full=2900),
+        "seeds": b.pick(smoke=1, reduced=b.seeds, full=15),
+    }
+
+
+def variant_config(variant: str, budget: Budget | str | None = None) -> Any:
+    """The configuration of one Fig. 3.1 variant at a budget."""
+    n = planar_counts(budget)
+    if variant in VARIANTS[:2]:
+        return svsl_config(
+            "planar-reacher",
+            n_experts=n["n_experts"],
+            iterations_per_expert=n["iterations_per_expert"],
+            weight_iterations=n["weight_iterations"],
+            responsibilities=variant == VARIANTS[0],
+        )
+    if variant == VARIANTS[2]:
+        return hireps.HiREPSConfig.for_task(
+            "planar-reacher", n_experts=n["n_experts"], iterations=n["hireps_iterations"]
+        )
+    raise ValueError(f"unknown variant {variant!r}; expected one of {VARIANTS}")
+
+
+def run_planar(
+    variant: str, seed: int, root: str | Path, budget: Budget | str | None = None
+) -> Path:
+    """Train one variant for one seed in a run directory under ``root`` (reused if done)."""
+    config = variant_config(variant, budget)
+    if isinstance(config, SVSLConfig):
+        return run_svsl("planar-reacher", config, seed, root, checkpoint_every=200)
+    return _run_hireps(config, seed, root)
+
+
+def _run_hireps(config: hireps.HiREPSConfig, seed: int, root: str | Path) -> Path:
+    record = {"algo": "hireps", "env": "planar-reacher", "seed": int(seed)} | asdict(config)
+    rd = RunDir.create(root, record, code_exclude=("srl/",))
+    if rd.done:
+        return rd.path
+    algo = hireps.HiREPS(make_task("planar-reacher"), config, int(seed))
+    saved = rd.load_checkpoint()
+    done = 0
+    if saved is not None:
+        algo.load_state_dict(saved["hireps"])
+        done = int(saved["iteration"])
+    for i in range(done, config.iterations):
+        rd.log(i + 1, **algo.iteration())
+        if (i + 1) % 100 == 0 or i + 1 == config.iterations:
+            rd.save_checkpoint({"hireps": algo.state_dict(), "iteration": i + 1})
+    rd.mark_done({"iterations": config.iterations})
+    return rd.path
+
+
+def load_model(path: str | Path) -> Any:
+    """The trained SVSL or HiREPS object stored in a finished run directory."""
+    rd = RunDir.open(path)
+    cfg = rd.config
+    state = rd.load_checkpoint()
+    if state is None:
+        raise FileNotFoundError(f"{rd.path} has no checkpoint")
+    task = make_task(cfg["env"], **cfg.get("task_kwargs", {}))
+    if cfg["algo"] == "svsl":
+        fields = {k: v for k, v in cfg.items() if k in SVSLConfig.__dataclass_fields__}
+        tuples = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+        s = SVSL(task, SVSLConfig(**tuples), int(cfg["seed"]))
+        s.load_state_dict(state["svsl"])
+        return s
+    if cfg["algo"] == "hireps":
+        fields = {k: v for k, v in cfg.items() if k in hireps.HiREPSConfig.__dataclass_fields__}
+        tuples = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
+        h = hireps.HiREPS(task, hireps.HiREPSConfig(**tuples), int(cfg["seed"]))
+        h.load_state_dict(state["hireps"])
+        return h
+    raise ValueError(f"{rd.path}: not an SVSL or HiREPS run (algo {cfg['algo']!r})")
+
+
+def _sample_means(model: Any, contexts: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:
+    """Per context, ``n`` draws o ~ π(o | c) and the chosen experts' means: (m, n, 10), (m, n)."""
+    rep = np.repeat(contexts, n, axis=0)
+    if isinstance(model, SVSL):
+        th, o = model.model.sample(rep, rng, mean=True)
+    else:  # HiREPS: its own gating draw, then the chosen expert's mean K_o c + k_o
+        _, o = model.sample(rep, rng)
+        th = np.einsum("njc,nc->nj", model.mix.K[o], rep) + model.mix.k[o]
+    return th.reshape(len(contexts), n, -1), np.asarray(o).reshape(len(contexts), n)
+
+
+def planar_scores(
+    model: Any, *, n_contexts: int = 200, n_draws: int = 20, seed: int = 0
+) -> dict[str, float]:
+    """Precision, validity and versatility of a trained model on contexts from p(c).
+
+    For each of ``n_contexts`` contexts, ``n_draws`` experts are drawn from π(o | c) and their
+    means executed: ``tip_distance`` (mean ‖f(θ) − c‖), ``collision_rate``, ``mean_return``
+    and ``experts_per_context`` (distinct experts among the draws: versatility).
+    """
+    task = make_task("planar-reacher")
+    rng = np.random.default_rng(seed)
+    contexts = task.sample_contexts(n_contexts, rng)
+    th, o = _sample_means(model, contexts, n_draws, rng)
+    out = task.evaluate(th.reshape(-1, th.shape[-1]), np.repeat(contexts, n_draws, axis=0))
+    distinct = [len(np.unique(row)) for row in o]
+    return {
+        "tip_distance": float(np.mean(out.info["tip_distance"])),
+        "collision_rate": float(np.mean(out.info["collision"])),
+        "mean_return": float(np.mean(out.returns)),
+        "experts_per_context": float(np.mean(distinct)),
+    }
+
+
+def draw_solutions(ax: plt.Axes, model: Any, *, n_draws: int = 100, seed: int = 0) -> plt.Axes:
+    """Fig. 3.1a/d/e: the arms of the experts chosen for the six contexts, one colour each."""
+    rng = np.random.default_rng(seed)
+    th, o = _sample_means(model, FIG_CONTEXTS, n_draws, rng)
+    cmap = plt.get_cmap("tab20")
+    for j in range(len(FIG_CONTEXTS)):
+        for expert in np.unique(o[j]):
+            pts = link_points(th[j][o[j] == expert][0])
+            ax.plot(pts[:, 0], pts[:, 1], "-", color=cmap(int(expert) % 20), lw=1.2, alpha=0.8)
+            ax.plot(*pts[-1], "o", color="green", ms=3)
+    _draw_scene(ax)
+    return ax
+
+
+def _draw_scene(ax: plt.Axes) -> None:
+    for x0, x1, y0, y1 in OBSTACLES:
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, color="tab:red", alpha=0.6))
+    ax.plot(FIG_CONTEXTS[:, 0], FIG_CONTEXTS[:, 1], "o", color="red", ms=5)
+    ax.add_patch(Rectangle((4.5, -6), 2.5, 12, fill=False, ls="--", color="grey"))
+    ax.set_aspect("equal")
+    ax.set_xlim(-1, 10)
+    ax.set_ylim(-7, 7)
+
+
+def draw_context_coverage(ax: plt.Axes, model: Any) -> plt.Axes:
+    """Fig. 3.1c/f: each expert's context Gaussian (2σ ellipse) in the context box."""
+    if isinstance(model, SVSL):
+        means, covs = model.model.ctx_mean, model.model.ctx_cov
+        weights = np.exp(model.model.log_w)
+    else:
+        mix = model.mix  # HiREPS's Bayes gating: π(o | c) ∝ π(o) N(c | μ_o, S_o)
+        means, covs, weights = mix.ctx_mean, mix.ctx_cov, np.exp(mix.log_prior)
+    cmap = plt.get_cmap("tab20")
+    for i, (m, c) in enumerate(zip(means, covs, strict=True)):
+        vals, vecs = np.linalg.eigh(c)
+        angle = np.degrees(np.arctan2(vecs[1, -1], vecs[0, -1]))
+        w, h = 4 * np.sqrt(np.maximum(vals[::-1], 1e-12))
+        alpha = 0.15 + 0.6 * float(weights[i] / weights.max())
+        ax.add_patch(Ellipse(m, w, h, angle=angle, color=cmap(i % 20), alpha=alpha))
+    ax.add_patch(Rectangle((4.5, -6), 2.5, 12, fill=False, ls="--", color="grey"))
+    ax.plot(FIG_CONTEXTS[:, 0], FIG_CONTEXTS[:, 1], "o", color="red", ms=4)
+    ax.set_xlim(3.5, 8)
+    ax.set_ylim(-7.5, 7.5)
+    ax.set_aspect("equal")
+    return ax
