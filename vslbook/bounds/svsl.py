@@ -27,6 +27,7 @@ import numpy as np
 from scipy.special import softmax
 
 from vslbook.bounds import Check, CheckReport, relative_tol
+from vslbook.bounds.foundations import _worst
 from vslbook.bounds.svsl_decomposition import (
     _brute_force_reps,
     _reps_solution,
@@ -86,22 +87,6 @@ __all__ = [
 
 
 # ------------------------------------------------------------------------------ checks
-
-
-def _worst(
-    name: str,
-    equation: str,
-    lhs: np.ndarray | float,
-    rhs: np.ndarray | float,
-    tol: np.ndarray | float,
-    relation: str = "==",
-) -> Check:
-    """The :class:`Check` of the worst element of an element-wise comparison."""
-    lhs, rhs, tol = np.broadcast_arrays(*(np.asarray(v, dtype=float) for v in (lhs, rhs, tol)))
-    excess = np.abs(lhs - rhs) - tol if relation == "==" else lhs - rhs - tol
-    excess = np.where(np.isnan(excess), np.inf, excess)
-    i = np.unravel_index(np.argmax(excess), excess.shape) if excess.ndim else ()
-    return Check(name, equation, lhs[i], rhs[i], tol[i], relation)
 
 
 def _tol(*values: float) -> float:

@@ -85,6 +85,7 @@ from vslbook.erl.mixture_baseline import (
     gaussian_log_pdf,
     log_responsibilities,
     mixture_update,
+    run_iterations,
 )
 
 __all__ = [
@@ -375,10 +376,5 @@ def train(
     metrics)`` after each."""
     algo = HiREPS(task, config, seed, workers)
     n = config.iterations if iterations is None else iterations
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise ValueError(f"iterations must be an integer >= 0, got {n!r}")
-    for i in range(int(n)):
-        metrics = algo.iteration()
-        if callback is not None:
-            callback(i, metrics)
+    run_iterations(algo, n, callback)
     return algo

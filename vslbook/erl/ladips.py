@@ -67,6 +67,7 @@ from vslbook.erl.mixture_baseline import (
     fit_gating,
     gating_log_probs,
     log_responsibilities,
+    run_iterations,
 )
 from vslbook.erl.more import cmore_update, entropy_loss_bound, fit_quadratic, joint_whitening
 
@@ -358,10 +359,5 @@ def train(
     metrics)`` after each."""
     algo = LaDiPS(task, config, seed, workers)
     n = config.iterations if iterations is None else iterations
-    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 0:
-        raise ValueError(f"iterations must be an integer >= 0, got {n!r}")
-    for i in range(int(n)):
-        metrics = algo.iteration()
-        if callback is not None:
-            callback(i, metrics)
+    run_iterations(algo, n, callback)
     return algo

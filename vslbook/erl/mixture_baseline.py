@@ -30,6 +30,7 @@ this module holds what they share:
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -342,3 +343,22 @@ class MixtureAlgorithm:
         self.rng.bit_generator.state = d["rng"]
         self.iterations_done = int(d["iterations_done"])
         self.total_samples = int(d["total_samples"])
+
+
+def run_iterations(
+    algo: MixtureAlgorithm,
+    iterations: int,
+    callback: Callable[[int, dict[str, float]], None] | None = None,
+) -> MixtureAlgorithm:
+    """Call ``algo.iteration()`` ``iterations`` times; ``callback(i, metrics)`` after each."""
+    if (
+        isinstance(iterations, bool)
+        or not isinstance(iterations, (int, np.integer))
+        or iterations < 0
+    ):
+        raise ValueError(f"iterations must be an integer >= 0, got {iterations!r}")
+    for i in range(int(iterations)):
+        metrics = algo.iteration()
+        if callback is not None:
+            callback(i, metrics)
+    return algo

@@ -49,7 +49,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from vslbook.erl.surrogate import Quadratic, fit_quadratic, joint_whitening, whitening_gaussian
+from vslbook.erl.surrogate import (
+    Quadratic,
+    fit_quadratic,
+    joint_whitening,
+    normalised_weights,
+    whitening_gaussian,
+)
 
 __all__ = [
     "CMoreResult",
@@ -500,16 +506,7 @@ def cmore_update(
     _check_quad(quad, n_exp, dc + dt)
     eps_arr, coef = _check_eps_coef(eps, entropy_coef, n_exp)
     hmin = _check_h_min(h_min, n_exp)
-    if weights is None:
-        w = np.full((n_exp, n), 1.0 / n)
-    else:
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (n_exp, n) or np.any(w < 0) or np.any(w.sum(axis=1) <= 0):
-            raise ValueError(
-                f"weights must be non-negative with shape {(n_exp, n)} and a positive sum "
-                f"per expert, got shape {w.shape}"
-            )
-        w = w / w.sum(axis=1, keepdims=True)
+    w = normalised_weights(weights, n_exp, n)
 
     A, a = np.asarray(quad.A, dtype=np.float64), np.asarray(quad.a, dtype=np.float64)
     beta = coef / np.asarray(quad.scale, dtype=np.float64)  # entropy temperature in σ_R units

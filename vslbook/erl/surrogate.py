@@ -186,16 +186,7 @@ def fit_quadratic(
         raise ValueError("x and y must be finite")
     if not ridge >= 0:
         raise ValueError(f"ridge must be >= 0, got {ridge}")
-    if weights is None:
-        w = np.full((n_exp, n), 1.0 / n)
-    else:
-        w = np.asarray(weights, dtype=np.float64)
-        if w.shape != (n_exp, n) or np.any(w < 0) or np.any(w.sum(axis=1) <= 0):
-            raise ValueError(
-                f"weights must be non-negative with shape {(n_exp, n)} and a positive "
-                f"sum per expert, got shape {w.shape}"
-            )
-        w = w / w.sum(axis=1, keepdims=True)
+    w = normalised_weights(weights, n_exp, n)
 
     # 1. whiten: x̂ = L⁻¹ (x − m)
     l_inv = np.linalg.inv(chol)
@@ -233,3 +224,16 @@ def fit_quadratic(
     a = np.einsum("eij,ej->ei", A, mean) + lt_a
     a0 = bias - 0.5 * np.einsum("ei,eij,ej->e", mean, A, mean) - np.einsum("ei,ei->e", lt_a, mean)
     return Quadratic(A=A, a=a, a0=a0, scale=y_std, offset=y_mean)
+
+
+def normalised_weights(weights: np.ndarray | None, n_exp: int, n: int) -> np.ndarray:
+    """Sample weights (E, n) normalised per expert; uniform 1/n when ``weights`` is None."""
+    if weights is None:
+        return np.full((n_exp, n), 1.0 / n)
+    w = np.asarray(weights, dtype=np.float64)
+    if w.shape != (n_exp, n) or np.any(w < 0) or np.any(w.sum(axis=1) <= 0):
+        raise ValueError(
+            f"weights must be non-negative with shape {(n_exp, n)} and a positive "
+            f"sum per expert, got shape {w.shape}"
+        )
+    return w / w.sum(axis=1, keepdims=True)
