@@ -173,3 +173,13 @@ def test_bad_configuration(task):
         SVSL(task, svsl_config("planar-reacher", context_init_cov=(1.0,)), 0)
     with pytest.raises(ValueError, match="buffer_size"):
         svsl_config("planar-reacher", buffer_size=10)
+
+
+def test_finished_run_made_by_other_code_is_redone(tmp_path, monkeypatch):
+    cfg = _tiny(n_experts=1, iterations_per_expert=3, weight_iterations=0)
+    path = run("planar-reacher", cfg, 6, tmp_path)
+    assert run("planar-reacher", cfg, 6, tmp_path) == path  # same code: reused
+    monkeypatch.setattr(RunDir, "code_matches", property(lambda self: False))
+    again = run("planar-reacher", cfg, 6, tmp_path)
+    assert again == path and RunDir(again).done
+    assert len(list((tmp_path / "_stale").iterdir())) == 1  # the old one moved aside

@@ -472,6 +472,9 @@ class SVSL:
 
 Callback = Callable[[int, dict[str, float]], None]
 
+#: Package paths an SVSL run cannot reach (left out of its recorded code fingerprint).
+CODE_EXCLUDE = ("srl/",)
+
 
 def train(
     task: EpisodicTask,
@@ -540,8 +543,13 @@ def run(
     task_kwargs: dict[str, Any] | None = None,
     progress: bool = False,
     checkpoint_every: int = 50,
+    reuse_stale: bool | None = None,
 ) -> Path:
     """Train SVSL in a run directory (resumes from its checkpoint; see vslbook.results).
+
+    A finished run is reused only if the code it was made by is the code running now;
+    otherwise it is moved to ``root/_stale`` and trained afresh (``reuse_stale=True`` or
+    ``$VSLBOOK_REUSE_STALE=1`` reuses it with a warning), as :func:`vslbook.training.run`.
 
     Writes ``config.json`` (the task, its arguments, the seed and every config field),
     ``metrics.jsonl`` (one row per iteration), ``checkpoint/state.pt`` and ``DONE``.
@@ -554,7 +562,11 @@ def run(
     task = make_task(task_name, **kwargs)
     record = {"algo": "svsl", "env": task_name, "task_kwargs": kwargs, "seed": int(seed)}
     record |= asdict(config)
-    rd = RunDir.create(root, record, code_exclude=("srl/",))
+    rd = RunDir.create(root, record, code_exclude=CODE_EXCLUDE)
+    if not rd.code_matches:  # made by other code: moved aside (or reused, see reuse_stale)
+        from vslbook.training import _stale
+
+        rd = _stale(rd, root, record, reuse_stale, CODE_EXCLUDE)
     if rd.done:
         return rd.path
     s = SVSL(task, config, int(seed))

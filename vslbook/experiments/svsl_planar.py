@@ -31,9 +31,10 @@ from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot import make_task
 from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points
 from vslbook.erl import hireps
-from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config
+from vslbook.erl.svsl import CODE_EXCLUDE, SVSL, SVSLConfig, svsl_config
 from vslbook.erl.svsl import run as run_svsl
 from vslbook.results import RunDir
+from vslbook.training import _stale
 
 __all__ = [
     "FIG_CONTEXTS",
@@ -96,7 +97,9 @@ def run_planar(
 
 def _run_hireps(config: hireps.HiREPSConfig, seed: int, root: str | Path) -> Path:
     record = {"algo": "hireps", "env": "planar-reacher", "seed": int(seed)} | asdict(config)
-    rd = RunDir.create(root, record, code_exclude=("srl/",))
+    rd = RunDir.create(root, record, code_exclude=CODE_EXCLUDE)
+    if not rd.code_matches:  # made by other code: moved aside and trained afresh
+        rd = _stale(rd, root, record, None, CODE_EXCLUDE)
     if rd.done:
         return rd.path
     algo = hireps.HiREPS(make_task("planar-reacher"), config, int(seed))
@@ -147,26 +150,70 @@ def _sample_means(model: Any, contexts: np.ndarray, n: int, rng) -> tuple[np.nda
     return th.reshape(len(contexts), n, -1), np.asarray(o).reshape(len(contexts), n)
 
 
+#: A solution "solves" a target if its tip is this close (the thesis defines no success for
+#: this task; Fig. 3.1 calls solutions precise and valid) and no link touches an obstacle.
+SOLVED_TIP_DISTANCE = 0.3
+
+#: Two chosen solutions count as different modes if their joint angles differ by more
+#: than this (Euclidean norm over the 10 wrapped angles, radians).
+MODE_DISTANCE = 1.0
+
+
+def distinct_solutions(thetas: np.ndarray, threshold: float = MODE_DISTANCE) -> int:
+    """Number of modes among solutions (n, 10): greedy grouping of angles within ``threshold``."""
+    wrapped = (np.asarray(thetas, dtype=np.float64) + np.pi) % (2 * np.pi) - np.pi
+    centres: list[np.ndarray] = []
+    for t in wrapped:
+        if all(np.linalg.norm(t - c) > threshold for c in centres):
+            centres.append(t)
+    return len(centres)
+
+
+def _context_gaussians(model: Any) -> tuple[np.ndarray, np.ndarray]:
+    if isinstance(model, SVSL):
+        return model.model.ctx_mean, model.model.ctx_cov
+    return model.mix.ctx_mean, model.mix.ctx_cov  # HiREPS's Bayes gating
+
+
 def planar_scores(
     model: Any, *, n_contexts: int = 200, n_draws: int = 20, seed: int = 0
 ) -> dict[str, float]:
-    """Precision, validity and versatility of a trained model on contexts from p(c).
+    """Precision, validity, versatility and coverage of a trained model on contexts from p(c).
 
     For each of ``n_contexts`` contexts, ``n_draws`` experts are drawn from π(o | c) and their
-    means executed: ``tip_distance`` (mean ‖f(θ) − c‖), ``collision_rate``, ``mean_return``
-    and ``experts_per_context`` (distinct experts among the draws: versatility).
+    means executed:
+
+    * ``tip_distance``: mean ‖f(θ) − c‖ (precision); ``collision_rate`` (validity);
+      ``mean_return``;
+    * ``solved_rate``: share of draws with tip distance ≤ :data:`SOLVED_TIP_DISTANCE` and no
+      collision;
+    * ``modes_per_context``: distinct solutions (:func:`distinct_solutions`) among the draws
+      that solve the target (0 if none does), versatility counted as the thesis does for beer
+      pong (A.3.2.1: only successful solutions); ``experts_per_context``: distinct experts
+      among all draws (experts that share one solution count once in the first and
+      separately in the second);
+    * ``coverage``: the share of the contexts that lie within two standard deviations
+      (Mahalanobis) of at least one expert's context distribution.
     """
     task = make_task("planar-reacher")
     rng = np.random.default_rng(seed)
     contexts = task.sample_contexts(n_contexts, rng)
     th, o = _sample_means(model, contexts, n_draws, rng)
     out = task.evaluate(th.reshape(-1, th.shape[-1]), np.repeat(contexts, n_draws, axis=0))
-    distinct = [len(np.unique(row)) for row in o]
+    solved = (out.info["tip_distance"] <= SOLVED_TIP_DISTANCE) & (out.info["collision"] == 0)
+    solved = solved.reshape(n_contexts, n_draws)
+    modes = [distinct_solutions(t[k]) if k.any() else 0 for t, k in zip(th, solved, strict=True)]
+    means, covs = _context_gaussians(model)
+    diff = contexts[:, None, :] - means[None]
+    maha = np.einsum("nei,eij,nej->ne", diff, np.linalg.inv(covs), diff)
     return {
         "tip_distance": float(np.mean(out.info["tip_distance"])),
         "collision_rate": float(np.mean(out.info["collision"])),
         "mean_return": float(np.mean(out.returns)),
-        "experts_per_context": float(np.mean(distinct)),
+        "solved_rate": float(np.mean(solved)),
+        "modes_per_context": float(np.mean(modes)),
+        "experts_per_context": float(np.mean([len(np.unique(row)) for row in o])),
+        "coverage": float(np.mean(np.min(maha, axis=1) <= 4.0)),
     }
 
 
@@ -196,12 +243,9 @@ def _draw_scene(ax: plt.Axes) -> None:
 
 def draw_context_coverage(ax: plt.Axes, model: Any) -> plt.Axes:
     """Fig. 3.1c/f: each expert's context Gaussian (2σ ellipse) in the context box."""
-    if isinstance(model, SVSL):
-        means, covs = model.model.ctx_mean, model.model.ctx_cov
-        weights = np.exp(model.model.log_w)
-    else:
-        mix = model.mix  # HiREPS's Bayes gating: π(o | c) ∝ π(o) N(c | μ_o, S_o)
-        means, covs, weights = mix.ctx_mean, mix.ctx_cov, np.exp(mix.log_prior)
+    means, covs = _context_gaussians(model)
+    log_w = model.model.log_w if isinstance(model, SVSL) else model.mix.log_prior
+    weights = np.exp(log_w)
     cmap = plt.get_cmap("tab20")
     for i, (m, c) in enumerate(zip(means, covs, strict=True)):
         vals, vecs = np.linalg.eigh(c)

@@ -1,0 +1,219 @@
+"""Fig. 3.2 (beer pong) and Fig. A.1 experiment code: thesis counts, runs, curves, grids."""
+
+import math
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+from scipy.special import logsumexp  # noqa: E402
+
+from vslbook.envs.robot.task import Rollouts  # noqa: E402
+from vslbook.erl import mixture_baseline as mb  # noqa: E402
+from vslbook.experiments import svsl_beer_pong as B  # noqa: E402
+from vslbook.results import RunDir  # noqa: E402
+
+
+def mb_rollouts(returns, success):
+    n = len(returns)
+    return Rollouts(np.asarray(returns, float), np.asarray(success, bool), np.ones(n, bool), {})
+
+
+def _episodes_by_schedule(cfg) -> int:
+    """Episodes of Algorithm 1 counted by walking its schedule iteration by iteration."""
+    total, experts = 0, 0
+    for t in range(cfg.n_experts * cfg.iterations_per_expert):
+        i = t % cfg.iterations_per_expert
+        if i == 0:
+            experts += 1
+            total += cfg.buffer_size
+        updated = experts if (i + 1) % cfg.fine_tune_every == 0 else 1
+        total += updated * (cfg.new_samples_expert + cfg.new_samples_context)
+    if cfg.weight_iterations:
+        total += experts * cfg.buffer_size
+    return total
+
+
+def test_full_budget_counts_are_the_thesis():
+    n = B.beer_pong_counts("full")
+    assert (n["n_experts"], n["iterations_per_expert"], n["fine_tune_every"]) == (70, 750, 50)
+    assert n["seeds"] == 20 and n["grid_draws"] == 100 and n["entropy_draws"] == 1000
+    s = B.method_config("SVSL", "full")
+    assert (s.alpha, s.beta, s.beta_w, s.n_experts, s.iterations_per_expert) == (
+        0.001, 0.5, 2.5, 70, 750,
+    )  # Table A.1  # fmt: skip
+    h = B.method_config("HiREPS", "full")
+    assert (h.eps, h.kappa, h.n_experts) == (0.3, 0.9, 70)  # Table A.2
+    la = B.method_config("LaDiPS", "full")
+    assert (la.eps, la.eps_gating, la.n_experts) == (0.1, 0.05, 70)  # Table A.3
+    assert la.alpha == pytest.approx(math.log(30))
+    # the baselines evaluate as many episodes as SVSL (to within one iteration)
+    episodes = _episodes_by_schedule(s)
+    assert B.svsl_episodes(s) == episodes == 3_229_940
+    for cfg in (h, la):
+        assert (
+            0 <= cfg.iterations * cfg.samples_per_iteration - episodes < cfg.samples_per_iteration
+        )
+    # a budget changes counts only
+    r = B.method_config("SVSL", "reduced")
+    assert (r.alpha, r.beta, r.beta_w, r.fine_tune_every, r.kl_context) == (
+        s.alpha, s.beta, s.beta_w, s.fine_tune_every, s.kl_context,
+    )  # fmt: skip
+    for k in (3, 1):
+        small = B.svsl_config("beer-pong", n_experts=k, iterations_per_expert=120)
+        assert B.svsl_episodes(small) == _episodes_by_schedule(small)
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="unknown method"):
+        B.method_config("MORE", "smoke")
+    with pytest.raises(ValueError, match="unknown method"):
+        B.run_beer_pong("svsl", 0, "/nonexistent", "smoke")
+    with pytest.raises(ValueError, match="seed"):
+        B.run_beer_pong("SVSL", -1, "/nonexistent", "smoke")
+    with pytest.raises(ValueError, match="grid shape"):
+        B.grid_contexts((0, 3))
+    with pytest.raises(ValueError, match="expected an SVSL"):
+        B.mixture_of(object())
+    with pytest.raises(ValueError, match="runs is empty"):
+        B.curve_frame({})
+
+
+def test_curve_frame_interpolates_each_run_inside_its_range(tmp_path):
+    """Runs logged at different episode counts land on one grid, linearly interpolated."""
+    runs = {}
+    for method, (x_end, slope) in {"SVSL": (100, 2.0), "HiREPS": (60, -1.0)}.items():
+        rd = RunDir.create(tmp_path, {"algo": method, "env": "t", "seed": 0})
+        for step, x in enumerate(np.linspace(10, x_end, 4), start=1):
+            rd.log(step, samples=float(x), test_return=slope * x + 3.0)
+            rd.log(step + 10, samples=float(x) + 1)  # a row without a test
+        runs[method] = [rd.path]
+    frame = B.curve_frame(runs, points=10)  # grid 10, 20, ..., 100
+    svsl = frame[frame["method"] == "SVSL"]
+    np.testing.assert_allclose(svsl["samples"], np.arange(10, 101, 10))
+    np.testing.assert_allclose(svsl["test_return"], 2.0 * svsl["samples"] + 3.0)
+    hi = frame[frame["method"] == "HiREPS"]
+    np.testing.assert_allclose(hi["samples"], [10, 20, 30, 40, 50, 60])  # no extrapolation
+    np.testing.assert_allclose(hi["test_return"], -hi["samples"] + 3.0)
+    curves = B.learning_curves(runs, points=10, reps=20)
+    assert (curves["n_runs"] == 1).all() and len(curves) == 16
+
+
+def test_grid_contexts_are_cell_centres():
+    g = B.grid_contexts((2, 2))  # box [-0.32, 0.32] x [-2.2, -1.2]
+    assert g.shape == (2, 2, 2)
+    np.testing.assert_allclose(g[0, 0], [-0.16, -1.95])
+    np.testing.assert_allclose(g[1, 1], [0.16, -1.45])
+
+
+@pytest.fixture(scope="module")
+def smoke_runs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("bp")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("VSLBOOK_WORKERS", "0")  # in-process: no pool start-up in a test
+        runs = {m: [B.run_beer_pong(m, 0, root, "smoke")] for m in B.METHODS}
+        yield runs
+
+
+@pytest.mark.slow
+def test_smoke_runs_give_curve_rows(smoke_runs):
+    for method, (path,) in smoke_runs.items():
+        rd = RunDir.open(path)
+        assert rd.done
+        df = rd.metrics_frame()
+        assert np.all(np.diff(df["samples"]) >= 0)
+        tested = df.dropna(subset=["test_return"])
+        assert len(tested) >= 1 and np.isfinite(tested["expected_entropy"]).all()
+        assert 0 <= tested["test_success"].min() <= tested["test_success"].max() <= 1
+        if method != "SVSL":  # executed episodes add up (rejected θ are not counted)
+            assert df["samples"].iloc[-1] == df["samples_iteration"].sum()
+            assert df["samples"].iloc[-1] <= df["total_samples"].iloc[-1] + 0
+        mtime = (path / "DONE").stat().st_mtime_ns
+        assert B.run_beer_pong(method, 0, path.parent, "smoke") == path  # reused
+        assert (path / "DONE").stat().st_mtime_ns == mtime
+    curves = B.learning_curves(smoke_runs, reps=50)
+    assert set(curves["method"]) == set(B.METHODS) and (curves["n_runs"] == 1).all()
+    ent = B.learning_curves(smoke_runs, "expected_entropy", reps=50)
+    assert np.isfinite(ent["iqm"]).all()
+    fig, ax = plt.subplots()
+    B.draw_learning_curves(ax, curves)
+    assert len(ax.lines) >= 3
+    plt.close(fig)
+
+
+@pytest.mark.slow
+def test_baseline_test_return_is_the_protocol(smoke_runs, monkeypatch):
+    """The logged test return is θ ~ π(θ | c) of the final model on SVSL's test contexts."""
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    path = smoke_runs["HiREPS"][0]
+    rd = RunDir.open(path)
+    row = rd.metrics_frame().dropna(subset=["test_return"]).iloc[-1]
+    model = B.load_model(path)
+    task = model.task
+    cfg = rd.config
+    contexts = task.sample_contexts(cfg["test_contexts"], np.random.default_rng([0, 1]))
+    theta, _ = mb.sample_mixture(model.mix, contexts, np.random.default_rng([0, 2, int(row.step)]))
+    returns = [task.episode(th, c).ret for th, c in zip(theta, contexts, strict=True)]
+    assert row["test_return"] == pytest.approx(np.mean(returns))
+
+
+def test_mixture_of_baseline_is_its_density(monkeypatch):
+    """Fig. A.1 for the baselines: the MixtureModel built from their arrays has their density."""
+    from vslbook.erl import hireps
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    task = B._task()
+    algo = hireps.HiREPS(task, B.method_config("HiREPS", "smoke"), 3)
+    rng = np.random.default_rng(0)
+    algo.mix.K = rng.normal(size=algo.mix.K.shape)  # not the zero initial gains
+    algo.mix.log_prior = algo.mix.log_prior + rng.normal(size=algo.mix.log_prior.shape)
+    algo.mix.log_prior -= logsumexp(algo.mix.log_prior)
+    c = task.sample_contexts(5, rng)
+    th, _ = algo.sample(c, rng)
+    want = logsumexp(mb.gating_log_probs(c, algo.mix) + mb.expert_log_density(c, th, algo.mix), 1)
+    import torch
+
+    got = B.mixture_of(algo).moe.log_prob(torch.from_numpy(th), torch.from_numpy(c)).numpy()
+    np.testing.assert_allclose(got, want, rtol=1e-9, atol=1e-9)
+
+
+@pytest.mark.slow
+def test_success_grid_on_smoke_svsl(smoke_runs, monkeypatch):
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    model = B.load_model(smoke_runs["SVSL"][0])
+    grid = B.success_grid(model, (2, 3), n_draws=2, seed=5)
+    assert grid.shape == (3, 2) and np.all((grid >= 0) & (grid <= 1))
+    # what is executed: per cell centre, the means of experts o ~ π(o | c) from rng(seed)
+    seen = {}
+    task = B._task()
+
+    def fake_evaluate(theta, contexts, workers=None):
+        seen["theta"], seen["c"] = theta, contexts
+        draw = np.tile(np.arange(4), len(contexts) // 4)
+        success = (contexts[:, 0] > 0) & (contexts[:, 1] > -1.5) & (draw < 3)  # known pattern
+        n = len(contexts)
+        return mb_rollouts(np.zeros(n), success)
+
+    monkeypatch.setattr(task, "evaluate", fake_evaluate)
+    got = B.success_grid(model, (2, 3), n_draws=4, seed=7)
+    centres = np.array([[x, y] for y in (-2.2 + 1 / 6, -1.7, -1.2 - 1 / 6) for x in (-0.16, 0.16)])
+    rep = np.repeat(centres, 4, axis=0)
+    np.testing.assert_allclose(seen["c"], rep)
+    o = model.model.choose_experts(rep, np.random.default_rng(7))
+    np.testing.assert_allclose(seen["theta"], model.model.expert_means(rep, o))
+    want = np.zeros((3, 2))
+    want[2, 1] = 0.75  # only the cell x > 0, y > -1.5, three of four draws
+    np.testing.assert_allclose(got, want)
+    monkeypatch.undo()
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    trajs = B.ball_trajectories(model, [0.0, -1.7], n_draws=3, seed=0)
+    for tr in trajs:
+        assert len(tr["t"]) == len(tr["z"]) and 0 <= tr["expert"] < model.model.n_experts
+    fig, ax = plt.subplots(1, 3)
+    B.draw_success_grid(ax[0], grid, "SVSL")
+    B.draw_context_coverage(ax[1], model)
+    B.draw_ball_trajectories(ax[2], trajs)
+    assert len(ax[1].patches) == model.model.n_experts + 1
+    plt.close(fig)

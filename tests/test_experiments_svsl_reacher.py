@@ -1,0 +1,164 @@
+"""Fig. 3.5 experiment (vslbook.experiments.svsl_reacher): counts, runs, curves, figure."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+import pytest
+
+from vslbook.envs.robot import make_task
+from vslbook.erl.ppo import PPOConfig
+from vslbook.erl.svsl import svsl_config
+from vslbook.experiments import svsl_reacher as sr
+from vslbook.experiments.svsl_planar import load_model
+
+matplotlib.use("Agg")
+
+# a tiny SVSL (1 expert, 3 iterations, small buffers) and PPO (2 updates of 512 steps)
+TINY_SVSL = {
+    "n_experts": 1, "iterations_per_expert": 3, "weight_iterations": 0, "buffer_size": 30,
+    "new_samples_expert": 10, "new_samples_context": 5, "test_every": 1, "test_contexts": 10,
+}  # fmt: skip
+TINY_PPO = PPOConfig(n_rollout_steps=512, n_envs=2, n_epochs=1, total_steps=2 * 512)
+COUNTS = ("n_experts", "iterations_per_expert", "weight_iterations", "test_every", "test_contexts")
+
+
+def test_full_counts_are_the_thesis() -> None:
+    n = sr.reacher_counts("full")
+    assert n["seeds"] == 20  # Section 3.4.3: 20 seeds
+    assert n["n_experts"] == 40  # Table A.4
+    assert n["iterations_per_expert"] == {"3.8": 250, "3.9": 250, "3.10": 800}
+    assert n["ppo_rewards"] == ("3.8", "3.9", "3.10")
+    table_a4 = {"3.8": (1e-6, 15, 15), "3.9": (0.01, 1, 2.5), "3.10": (1, 25, 25)}
+    for reward, (alpha, beta, beta_w) in table_a4.items():
+        svsl, ppo = sr.reacher_configs(reward, "full")
+        assert (svsl.alpha, svsl.beta, svsl.beta_w) == (alpha, beta, beta_w)
+        assert svsl.fine_tune_every == 50  # H
+        assert svsl.n_experts == 40
+        assert svsl.iterations_per_expert == n["iterations_per_expert"][reward]
+        # Table A.5
+        assert (ppo.learning_rate, ppo.n_rollout_steps, ppo.gae_lambda, ppo.gamma) == (
+            1e-4, 16384, 0.95, 0.99,
+        )  # fmt: skip
+        assert (ppo.batch_size, ppo.clip_range, ppo.net_arch) == (64, 0.2, (64, 64))
+
+
+@pytest.mark.parametrize("budget", ["smoke", "reduced"])
+@pytest.mark.parametrize("reward", ["3.8", "3.9", "3.10"])
+def test_budget_changes_only_counts(budget: str, reward: str) -> None:
+    small, small_ppo = sr.reacher_configs(reward, budget)
+    full, full_ppo = sr.reacher_configs(reward, "full")
+    a, b = asdict(small), asdict(full)
+    for key in COUNTS:
+        a.pop(key), b.pop(key)
+    assert a == b
+    assert asdict(small_ppo) | {"total_steps": 0} == asdict(full_ppo) | {"total_steps": 0}
+    # and the SVSL settings are svsl_config's own (no override hidden in the experiment)
+    base = asdict(svsl_config("reacher5-ch3", reward=reward))
+    for key in COUNTS:
+        base.pop(key)
+    assert a == base
+
+
+def test_bad_method_and_reward(tmp_path: Path) -> None:
+    with pytest.raises(ValueError, match="method"):
+        sr.run_reacher("TRPO", "3.8", 0, tmp_path, "smoke")
+    with pytest.raises(ValueError, match="reward"):
+        sr.run_reacher("SVSL", "3.7", 0, tmp_path, "smoke")
+    with pytest.raises(ValueError, match="reward"):
+        sr.reacher_configs("3.11")
+    with pytest.raises(ValueError, match="method"):
+        sr.reacher_curves({("DIME", "3.8"): []})
+    with pytest.raises(ValueError, match="seed"):
+        sr.run_reacher("PPO", "3.8", -1, tmp_path, "smoke")
+    with pytest.raises(ValueError, match="SVSLConfig"):
+        sr.run_reacher("SVSL", "3.8", 0, tmp_path, "smoke", config=TINY_PPO)
+    with pytest.raises(ValueError, match="unknown budget"):
+        sr.reacher_counts("huge")
+
+
+@pytest.fixture(scope="module")
+def tiny_runs(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    root = tmp_path_factory.mktemp("reacher")
+    svsl = replace(sr.reacher_configs("3.10", "smoke")[0], **TINY_SVSL)
+    return {
+        "root": root,
+        "svsl_config": svsl,
+        ("SVSL", "3.10"): [sr.run_reacher("SVSL", "3.10", 4, root, "smoke", config=svsl)],
+        ("PPO", "3.8"): [sr.run_reacher("PPO", "3.8", 1, root, "smoke", config=TINY_PPO)],
+    }
+
+
+@pytest.mark.slow  # trains a tiny SVSL and PPO once (module fixture)
+def test_curves_frame(tiny_runs: dict) -> None:
+    paths = {k: v for k, v in tiny_runs.items() if isinstance(k, tuple)}
+    df = sr.reacher_curves(paths)
+    assert list(df.columns) == ["method", "reward", "seed", "episodes", "return"]
+    assert set(map(tuple, df[["method", "reward", "seed"]].drop_duplicates().values)) == {
+        ("SVSL", "3.10", 4), ("PPO", "3.8", 1),
+    }  # fmt: skip
+    for _, run in df.groupby(["method", "seed"]):
+        assert np.all(np.diff(run["episodes"].to_numpy()) > 0)
+        assert np.all(np.isfinite(run["return"]))
+    # PPO: evaluated at step 0 and after 1024 steps (one chunk), 200 steps per episode
+    ppo = df[df["method"] == "PPO"]
+    assert ppo["episodes"].tolist() == [0.0, 1024 / 200]
+    # SVSL: one test per iteration; executed episodes: the 30-sample fill, then 10 + 5 per
+    # iteration, minus those drawn outside the half disk (punished, not executed)
+    svsl = df[df["method"] == "SVSL"]
+    assert len(svsl) == 3
+    assert svsl["episodes"].iloc[-1] <= 30 + 3 * 15
+    assert svsl["episodes"].iloc[0] >= 1
+
+
+@pytest.mark.slow
+def test_svsl_is_scored_on_the_ppo_goals(tiny_runs: dict) -> None:
+    """The logged final return equals a re-evaluation of the saved model on the PPO goals."""
+    path = tiny_runs[("SVSL", "3.10")][0]
+    logged = sr.reacher_curves({("SVSL", "3.10"): [path]})["return"].iloc[-1]
+    model = load_model(path)  # the state after the last iteration (3)
+    # independent draw: evaluation_goals' rule, the right half disk sampled by rejection
+    rng = np.random.default_rng(343)
+    goals = []
+    while len(goals) < 10:
+        g = rng.uniform([0.0, -0.5], [0.5, 0.5], size=(20, 2))  # batches of max(2n, 16)
+        goals.extend(g[np.sum(g**2, axis=1) <= 0.25])
+    goals = np.array(goals[:10])
+    task = make_task("reacher5-ch3", reward="3.10")
+    theta, _ = model.model.sample(goals, np.random.default_rng([4, 2, 3]))
+    out = task.evaluate(theta, goals, workers=0)
+    np.testing.assert_allclose(logged, np.mean(out.returns), rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_finished_runs_are_reused(tiny_runs: dict) -> None:
+    root = tiny_runs["root"]
+    for key, method, reward, seed, config in (
+        (("SVSL", "3.10"), "SVSL", "3.10", 4, tiny_runs["svsl_config"]),
+        (("PPO", "3.8"), "PPO", "3.8", 1, TINY_PPO),
+    ):
+        path = tiny_runs[key][0]
+        assert path.parent == root and path.name.startswith(f"{method.lower()}-reacher5-ch3-s")
+        files = [path / "metrics.jsonl", path / "DONE"]
+        before = [f.stat().st_mtime_ns for f in files]
+        again = sr.run_reacher(method, reward, seed, root, "smoke", config=config)
+        assert again == path
+        assert [f.stat().st_mtime_ns for f in files] == before  # nothing rewritten
+
+
+@pytest.mark.slow
+def test_figure(tiny_runs: dict) -> None:
+    paths = {k: v for k, v in tiny_runs.items() if isinstance(k, tuple)}
+    fig = sr.draw_fig_3_5(sr.reacher_curves(paths), "smoke")
+    axes = fig.axes
+    assert [ax.get_title() for ax in axes] == [
+        "(a) reward Eq. 3.8", "(b) reward Eq. 3.9", "(c) reward Eq. 3.10",
+    ]  # fmt: skip
+    assert [t.get_text() for t in axes[0].get_legend().get_texts()] == ["PPO"]
+    assert [t.get_text() for t in axes[2].get_legend().get_texts()] == ["SVSL"]
+    texts = " ".join(t.get_text() for t in fig.texts)
+    assert "smoke" in texts and "thesis 20" in texts
+    matplotlib.pyplot.close(fig)
