@@ -171,14 +171,22 @@ def test_out_of_range_contexts_are_penalised_without_simulation():
     assert not r.executed.any() and r.n_executed == 0
     np.testing.assert_allclose(r.returns, [-(0.1**2), -((np.hypot(0.4, 0.4) - 0.5) ** 2)])
     assert task._sim is None  # the simulator was never built, let alone stepped
+
+
+def test_ch3_out_of_range_goals_are_simulated_and_punished():
+    """Chapter 3's reacher adds −k·d² to the simulated return (module docstring)."""
+    rng = np.random.default_rng(0)
+    theta = 0.3 * rng.standard_normal((4, 25))
+    ctx = np.array([[-0.1, 0.2], [-0.3, 0.8], [0.4, 0.4], [0.2, 0.1]])
+    d2 = np.array([0.01, 0.3**2 + 0.3**2, (np.hypot(0.4, 0.4) - 0.5) ** 2, 0.0])
     for reward, k in (("3.8", 1000), ("3.9", 1000), ("3.10", 50000)):
         ch3 = Reacher5Ch3(reward)
-        ctx = [[-0.1, 0.2], [-0.3, 0.8], [0.4, 0.4], [0.2, 0.1]]
-        r = ch3.evaluate(np.zeros((4, 25)), ctx, out_of_range="penalise", workers=1)
-        np.testing.assert_array_equal(r.executed, [False, False, False, True])
-        d2 = [0.01, 0.3**2 + 0.3**2, (np.hypot(0.4, 0.4) - 0.5) ** 2]
-        np.testing.assert_allclose(r.returns[:3], -k * np.array(d2))
-        assert ch3.sim.physics_steps == 400  # only the valid context was simulated
+        r = ch3.evaluate(theta, ctx, out_of_range="penalise", workers=1)
+        assert r.executed.all() and r.n_executed == 4
+        plain = [ch3.episode(t, c).ret for t, c in zip(theta, ctx, strict=True)]
+        np.testing.assert_allclose(r.returns, np.array(plain) - k * d2)
+        with pytest.raises(ValueError, match="outside"):
+            ch3.evaluate(theta, ctx, workers=1)
 
 
 def test_bad_input_errors():

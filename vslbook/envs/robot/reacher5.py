@@ -46,7 +46,13 @@ at the end of the episode.
     * start: arm horizontal pointing **left** (joint 0 = π, others 0), q̇0 = 0.
     * context c = goal (x, y) on the **right** half disk x ≥ 0, x² + y² ≤ 0.25 (rejection
       from [0, 0.5] × [−0.5, 0.5]); out-of-range punishment −k·d² with d the distance to
-      the half disk, k = 1000 (Eqs. 3.8, 3.9) or 50000 (Eq. 3.10) (A.3.3).
+      the half disk, k = 1000 (Eqs. 3.8, 3.9) or 50000 (Eq. 3.10) (A.3.3). With
+      ``evaluate(..., out_of_range="penalise")`` such a goal is still simulated and the
+      punishment is *added* to its return (as A.3.1 does for the planar reacher): A.3.3 does
+      not say which, and a punishment that replaces the return lets SVSL's context
+      distributions leave the half disk (measured with Eq. 3.10: an untrained expert earns
+      about −1200 inside, while d = 0.1 outside costs only −500; the contexts moved out and
+      the expert stopped getting episodes).
     * reward (``reward="3.8" | "3.9" | "3.10"``), t = 0..199 the control step:
       Eq. 3.8: r_t = −‖t − g‖ − Σa²; Eq. 3.9: −Σa² and −‖t − g‖ only for t ≥ 190;
       Eq. 3.10: t < 198: −Σa² − Σv², t ≥ 198: −500‖t − g‖ − Σa² − 1000Σv².
@@ -72,7 +78,7 @@ import numpy as np
 
 from vslbook.envs.robot.assets import load_model
 from vslbook.envs.robot.primitives import ProDMPSpec, promp_trajectory
-from vslbook.envs.robot.task import Episode, EpisodicTask
+from vslbook.envs.robot.task import Episode, EpisodicTask, Rollouts
 
 MODEL_FILE = "reacher/assets/reacher_5links.xml"
 N_LINKS = 5
@@ -380,6 +386,24 @@ class Reacher5Ch3(_ReacherTask):
 
     def describe_contexts(self) -> str:
         return super().describe_contexts() + f"; goal_x² + goal_y² <= {RADIUS**2:g}"
+
+    def evaluate(
+        self,
+        theta: Any,
+        contexts: Any,
+        *,
+        workers: int | None = None,
+        out_of_range: str = "error",
+    ) -> Rollouts:
+        """As :meth:`EpisodicTask.evaluate`, except that with ``out_of_range="penalise"`` a
+        goal outside the half disk is simulated too and −k·d² is added to its return (see
+        the module docstring); such episodes count as executed."""
+        if out_of_range != "penalise":
+            return super().evaluate(theta, contexts, workers=workers, out_of_range=out_of_range)
+        th, c = self.check_batch(theta, contexts, out_of_range)
+        out = Rollouts.from_episodes(self._run(th, c, workers), self.info_keys)
+        out.returns[:] = out.returns + self.context_penalty(c)  # 0 inside the half disk
+        return out
 
     def step_rewards(
         self, actions: np.ndarray, qs: np.ndarray, dqs: np.ndarray, goal: np.ndarray
