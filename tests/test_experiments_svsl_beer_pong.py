@@ -192,7 +192,10 @@ def test_success_grid_on_smoke_svsl(smoke_runs, monkeypatch):
     def fake_evaluate(theta, contexts, workers=None):
         seen["theta"], seen["c"] = theta, contexts
         draw = np.tile(np.arange(4), len(contexts) // 4)
-        success = (contexts[:, 0] > 0) & (contexts[:, 1] > -1.5) & (draw < 3)  # known pattern
+        x, y = contexts[:, 0], contexts[:, 1]
+        success = ((x > 0) & (y < -1.9) & (draw < 3)) | (
+            (x < 0) & (np.abs(y + 1.7) < 0.1) & (draw < 1)
+        )
         n = len(contexts)
         return mb_rollouts(np.zeros(n), success)
 
@@ -204,7 +207,8 @@ def test_success_grid_on_smoke_svsl(smoke_runs, monkeypatch):
     o = model.model.choose_experts(rep, np.random.default_rng(7))
     np.testing.assert_allclose(seen["theta"], model.model.expert_means(rep, o))
     want = np.zeros((3, 2))
-    want[2, 1] = 0.75  # only the cell x > 0, y > -1.5, three of four draws
+    want[0, 1] = 0.75  # cell x > 0 at the smallest y: three of four draws succeed
+    want[1, 0] = 0.25  # cell x < 0 at the middle y: one of four
     np.testing.assert_allclose(got, want)
     monkeypatch.undo()
     monkeypatch.setenv("VSLBOOK_WORKERS", "0")
