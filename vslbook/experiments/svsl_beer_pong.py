@@ -54,6 +54,7 @@ from vslbook.erl.mixture_baseline import MixtureAlgorithm
 from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config
 from vslbook.erl.svsl import train as train_svsl
 from vslbook.erl.svsl_model import MixtureModel
+from vslbook.experiments.erl_runs import open_run
 from vslbook.results import RunDir
 from vslbook.stats import iqm_curve
 
@@ -280,7 +281,7 @@ def run_beer_pong(
 def _run_svsl(config: SVSLConfig, seed: int, root: str | Path, extra: dict[str, Any]) -> Path:
     """:func:`vslbook.erl.svsl.run` for beer pong, adding the expected entropy at test rows."""
     record = {"algo": "svsl", "env": TASK, "task_kwargs": {}, "seed": seed} | asdict(config)
-    rd = RunDir.create(root, record | extra, code_exclude=("srl/",))
+    rd = open_run(root, record | extra)
     if rd.done:
         return rd.path
     task = _task()
@@ -309,7 +310,7 @@ def _run_baseline(
 ) -> Path:
     """HiREPS or LaDiPS in a run directory, with SVSL's test protocol every ``test_every``."""
     record = {"algo": method.lower(), "env": TASK, "seed": seed} | asdict(config)
-    rd = RunDir.create(root, record | extra, code_exclude=("srl/",))
+    rd = open_run(root, record | extra)
     if rd.done:
         return rd.path
     task = _task()

@@ -31,10 +31,10 @@ from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot import make_task
 from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points
 from vslbook.erl import hireps
-from vslbook.erl.svsl import CODE_EXCLUDE, SVSL, SVSLConfig, svsl_config
+from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config
 from vslbook.erl.svsl import run as run_svsl
+from vslbook.experiments.erl_runs import open_run
 from vslbook.results import RunDir
-from vslbook.training import _stale
 
 __all__ = [
     "FIG_CONTEXTS",
@@ -97,9 +97,7 @@ def run_planar(
 
 def _run_hireps(config: hireps.HiREPSConfig, seed: int, root: str | Path) -> Path:
     record = {"algo": "hireps", "env": "planar-reacher", "seed": int(seed)} | asdict(config)
-    rd = RunDir.create(root, record, code_exclude=CODE_EXCLUDE)
-    if not rd.code_matches:  # made by other code: moved aside and trained afresh
-        rd = _stale(rd, root, record, None, CODE_EXCLUDE)
+    rd = open_run(root, record)
     if rd.done:
         return rd.path
     algo = hireps.HiREPS(make_task("planar-reacher"), config, int(seed))

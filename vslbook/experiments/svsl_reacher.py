@@ -52,6 +52,7 @@ from vslbook.envs.robot import make_task
 from vslbook.envs.robot.reacher5 import CH3_REWARDS, N_STEPS
 from vslbook.erl.ppo import EVAL_GOAL_SEED, PPOConfig, evaluation_goals, train_ppo
 from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config, train
+from vslbook.experiments.erl_runs import open_run
 from vslbook.results import RunDir
 
 __all__ = [
@@ -160,7 +161,7 @@ def _run_svsl(reward: str, config: SVSLConfig, seed: int, root: str | Path) -> P
     record = {"algo": "svsl", "env": _TASK, "task_kwargs": {"reward": reward}, "seed": int(seed)}
     record |= asdict(config)
     record["test_goals"] = f"ppo.evaluation_goals(seed={EVAL_GOAL_SEED})"
-    rd = RunDir.create(root, record, code_exclude=("srl/",))
+    rd = open_run(root, record)
     if rd.done:
         return rd.path
     s = SVSL(task, config, int(seed))
@@ -192,7 +193,7 @@ def _run_ppo(
         "algo": "ppo", "env": _TASK, "task_kwargs": {"reward": reward}, "seed": int(seed),
         "eval_every": int(eval_every), "eval_episodes": int(eval_goals), **asdict(config),
     }  # fmt: skip
-    rd = RunDir.create(root, record, code_exclude=("srl/",))
+    rd = open_run(root, record)
     if rd.done:
         return rd.path
     rows = train_ppo(
