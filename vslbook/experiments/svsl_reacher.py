@@ -20,19 +20,19 @@ return (Eq. 3.8 / 3.9 / 3.10 summed over the T = 200 steps) on the same fixed go
 (:func:`vslbook.erl.ppo.evaluate`); SVSL's run replaces its own test contexts by these goals
 and keeps its own test, i.e. per goal one expert o ~ π(o | c) and one θ ~ π(θ | c, o) is
 drawn and executed (while experts are still being added the newest, untrained one is left
-out). The x axis counts episodes: SVSL's executed episodes (``samples``; θ drawn for contexts
-outside the half disk are punished, not executed, A.3.3) and PPO's environment steps / 200.
+out). The x axis counts episodes: SVSL's executed episodes (``samples``; goals drawn outside
+the half disk are simulated and punished, so they count) and PPO's environment steps / 200.
 
 Observed at the reduced size (seed 0, :func:`vslbook.erl.svsl.svsl_config` unchanged: initial
-expert covariance I and the context initialisation, neither from the thesis). Eq. 3.8: the
-test return goes from −112 to about −100 (doing nothing, θ = 0, scores −141; holding an
-inverse-kinematics posture about −15). Eq. 3.10: −1764 → −1171 within 50 iterations, then
-the context distribution leaves the half disk (executed episodes stop growing) and the test
-return falls to about −1.2·10⁵. A context just outside the range costs only −50000·d²
-(−500 at d = 0.1), while the untrained expert's returns inside are about −1200 (θ = 0:
-−705), so Eq. 3.6 prefers contexts outside; with no executed episodes the expert then
-drifts. An initial expert covariance of 0.1·I behaves the same (−894 → −820, then the
-collapse after about 100 iterations). No override is applied here.
+expert covariance I and the context initialisation, neither from the thesis). Eq. 3.10: the
+test return rises from −1004 to about −253 within 20.8 k executed episodes and stays there;
+Eq. 3.8: −92 → −83 within 8.2 k episodes (doing nothing, θ = 0, scores −705 and −141;
+holding an inverse-kinematics posture about −15 on Eq. 3.8). These runs use the reacher's
+rule that a goal outside the half disk is simulated and punished on top of its return; when
+the punishment replaced the return instead, Eq. 3.6 moved the context distribution out of
+the half disk under Eq. 3.10 (−50000·d² is only −500 at d = 0.1, while an untrained expert
+earns about −1200 inside), the expert stopped getting episodes and the return collapsed to
+about −1.2·10⁵ (see :mod:`vslbook.envs.robot.reacher5`).
 """
 
 from __future__ import annotations
