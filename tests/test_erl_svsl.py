@@ -183,3 +183,30 @@ def test_finished_run_made_by_other_code_is_redone(tmp_path, monkeypatch):
     again = run("planar-reacher", cfg, 6, tmp_path)
     assert again == path and RunDir(again).done
     assert len(list((tmp_path / "_stale").iterdir())) == 1  # the old one moved aside
+
+
+def test_mixture_densities_agree_with_the_dists_mixture():
+    """SVSL's batched densities against vslbook.dists.LinearGaussianMoE (torch, Eq. 2.48)."""
+    import torch
+
+    from vslbook.erl.svsl_model import MixtureModel
+
+    rng = np.random.default_rng(7)
+    m = MixtureModel.empty(2, 3)
+    for _ in range(5):
+        a = rng.normal(size=(2, 2))
+        b = rng.normal(size=(3, 3))
+        m.add_expert(rng.normal(size=2), a @ a.T + 0.3 * np.eye(2), rng.normal(size=(3, 2)),
+                     rng.normal(size=3), b @ b.T + 0.2 * np.eye(3))  # fmt: skip
+    m.log_w = np.log(rng.dirichlet(np.ones(5)))
+    m.changed()
+    c, th = rng.normal(size=(3000, 2)), rng.normal(size=(3000, 3))
+    log_resp, log_gate = m.log_responsibilities(c, th)
+    moe = m.moe
+    tc, tt = torch.from_numpy(c), torch.from_numpy(th)
+    ref_gate = moe.log_gating(tc).numpy()
+    joint = moe.expert_log_prob(tt, tc).numpy() + ref_gate
+    ref_resp = joint - np.logaddexp.reduce(joint, axis=1, keepdims=True)
+    np.testing.assert_allclose(log_gate, ref_gate, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(log_resp, ref_resp, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(m.log_prob(c, th), moe.log_prob(tt, tc).numpy(), rtol=1e-10)
