@@ -21,7 +21,7 @@
 # | chapter | notebook | what it covers | modules |
 # |---|---|---|---|
 # | 2 Foundations | `02_foundations` | max-entropy RL, ERL vs SRL, curricula, ProMP/DMP/ProDMP, mixtures of experts, diffusion, variational inference, mutual information | `vslbook.bounds.foundations`, `vslbook.dists`, `vslbook.movement`, `vslbook.erl.pg`, `vslbook.envs` |
-# | 3 SVSL | `03_svsl` (planned) | mixture of linear experts with per-expert context distributions, MORE / contextual MORE / REPS | `vslbook.erl` |
+# | 3 SVSL | `03_svsl` | mixture of linear experts with per-expert context distributions: the bounds 3.4–3.7 checked, MORE / contextual MORE / REPS, Figs. 3.1, 3.2 (beer pong), 3.5, A.1 live | `vslbook.erl.svsl`, `vslbook.bounds.svsl`, `vslbook.experiments.svsl_*` |
 # | 4 Di-SkilL | `04_diskill` (planned) | energy-based per-expert curricula, deep experts with trust-region projection layers | `vslbook.erl` |
 # | 5 DIME | `05_dime` | the entropy lower bound of a diffusion policy and its gap, soft policy iteration, Figs. 5.1-5.3 and 5.7 live or from the published data, the chapter's ablations | `vslbook.bounds.dime`, `vslbook.srl`, `vslbook.envs.step_based`, `vslbook.experiments` |
 #
