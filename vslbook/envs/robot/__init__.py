@@ -32,6 +32,7 @@ TASKS: dict[str, tuple[str, str]] = {
     "reacher5-ch3": (_R + "reacher5:Reacher5Ch3", "vslbook/Reacher5Ch3-v0"),
     "table-tennis-4d": (_R + "table_tennis:TableTennis4D", "vslbook/TableTennis4D-v0"),
     "table-tennis-hard": (_R + "table_tennis:TableTennisHard", "vslbook/TableTennisHard-v0"),
+    "table-tennis-ch3": (_R + "table_tennis_ch3:TableTennisCh3", "vslbook/TableTennisCh3-v0"),
     "beer-pong": (_R + "beer_pong:BeerPong", "vslbook/BeerPong-v0"),
     "hopper-jump": (_R + "hopper_jump:HopperJump", "vslbook/HopperJump-v0"),
     "box-pushing-obstacle": (
