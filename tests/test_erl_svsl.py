@@ -210,3 +210,17 @@ def test_mixture_densities_agree_with_the_dists_mixture():
     np.testing.assert_allclose(log_gate, ref_gate, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(log_resp, ref_resp, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(m.log_prob(c, th), moe.log_prob(tt, tc).numpy(), rtol=1e-10)
+
+
+def test_table_tennis_preset_is_table_a1_and_runs():
+    cfg = svsl_config("table-tennis-ch3")
+    assert (cfg.alpha, cfg.beta, cfg.beta_w, cfg.n_experts, cfg.iterations_per_expert) == (
+        1e-5, 0.2, 0.2, 50, 800,
+    )  # fmt: skip
+    assert (cfg.buffer_size, cfg.new_samples_expert, cfg.new_samples_context) == (567, 226, 8)
+    tt = make_task("table-tennis-ch3")
+    small = replace(cfg, n_experts=1, iterations_per_expert=1, weight_iterations=0,
+                    buffer_size=40, new_samples_expert=8, test_contexts=4)  # fmt: skip
+    s = train(tt, small, seed=0)
+    assert s.iteration == 1 and s.episodes == 40 + 8 + 8 + 0
+    tt.close()
