@@ -166,9 +166,12 @@ def nadaraya_watson(
     if w.shape != (len(x),) or np.any(w < 0) or not np.any(w > 0):
         raise ValueError("weights must be (n,), non-negative and not all zero")
     log_w = np.log(np.maximum(w, 1e-300))
+    x2 = np.einsum("ij,ij->i", x, x)
     out = np.empty(len(q))
     for s in range(0, len(q), chunk):
-        d2 = ((q[s : s + chunk, None, :] - x[None]) ** 2).sum(-1)
+        qb = q[s : s + chunk]
+        # ‖q − x‖² = ‖q‖² + ‖x‖² − 2 q·x: one matrix product per block
+        d2 = np.maximum(np.einsum("ij,ij->i", qb, qb)[:, None] + x2[None] - 2 * qb @ x.T, 0.0)
         logits = log_w[None] - d2 / scale
         logits -= logits.max(axis=1, keepdims=True)
         k = np.exp(logits)
