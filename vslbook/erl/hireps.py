@@ -188,6 +188,13 @@ _BP_MEAN = (0.7,) + (0.0,) * 14  # duration in the middle of [0.1, 1.3] s
 _BP_COV = (0.25,) + (0.25, 5.0) * 7  # SVSL's beer pong expert covariance
 _TT_MEAN = (1.03, 0.325) + (0.0,) * 21  # τ, delay in the middle of their bounds
 _TT_COV = (0.02, 0.01) + (1.0,) * 21
+# Chapter 3 table tennis (θ = [l, 21 ProMP weights]): the duration l starts at 1 s with
+# variance 0.1 (std ≈ 0.32 s; roughly the flight time of the served ball at 2.5 m/s to the
+# robot, and l < 0.1 s, which is rejected, is three standard deviations away); the weights
+# start at 0 (the rest posture) with SVSL's unit variance. 28,007 iterations × 500
+# episodes match SVSL's 14,003,100 episodes at N = 50, K = 800.
+_TT3_MEAN = (1.0,) + (0.0,) * 21
+_TT3_COV = (0.1,) + (1.0,) * 21
 
 #: Per-task presets (task names of :mod:`vslbook.envs.robot`).
 HIREPS_PRESETS: dict[str, HiREPSConfig] = {
@@ -202,6 +209,10 @@ HIREPS_PRESETS: dict[str, HiREPSConfig] = {
     "table-tennis-4d": HiREPSConfig(
         eps=0.3, kappa=0.9, n_experts=50, samples_per_iteration=500, iterations=18400,
         init_mean=_TT_MEAN, init_cov=_TT_COV, init_mean_std=0.1,
+    ),
+    "table-tennis-ch3": HiREPSConfig(
+        eps=0.3, kappa=0.9, n_experts=50, samples_per_iteration=500, iterations=28007,
+        init_mean=_TT3_MEAN, init_cov=_TT3_COV, init_mean_std=0.1,
     ),
 }  # fmt: skip
 

@@ -166,6 +166,13 @@ LADIPS_PRESETS: dict[str, LaDiPSConfig] = {
         init_mean=(1.03, 0.325) + (0.0,) * 21, init_cov=(0.02, 0.01) + (1.0,) * 21,
         init_mean_std=0.1,
     ),
+    # Chapter 3 table tennis, θ = [l, 21 ProMP weights]: the initial mixture of HiREPS's
+    # "table-tennis-ch3" preset (l from 1 s with variance 0.1, weights 0 with variance 1)
+    "table-tennis-ch3": LaDiPSConfig(
+        eps=0.01, eps_gating=0.02, alpha=math.log(30), n_experts=50,
+        samples_per_iteration=500, iterations=28007,
+        init_mean=(1.0,) + (0.0,) * 21, init_cov=(0.1,) + (1.0,) * 21, init_mean_std=0.1,
+    ),
 }  # fmt: skip
 
 
