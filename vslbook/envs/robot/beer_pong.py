@@ -245,13 +245,7 @@ class BeerPong(EpisodicTask):
 
     # -- episodes -----------------------------------------------------------------------
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
-        theta = np.asarray(theta, dtype=np.float64)
-        context = np.asarray(context, dtype=np.float64)
-        if theta.shape != (self.n_params,) or context.shape != (self.context_dim,):
-            raise ValueError(
-                f"{self.name}: theta must have shape ({self.n_params},) and context "
-                f"({self.context_dim},), got {theta.shape} and {context.shape}"
-            )
+        theta, context = self.episode_args(theta, context)
         duration = float(theta[0])
         pen = duration_penalty(duration)
         if pen != 0.0:

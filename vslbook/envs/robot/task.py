@@ -186,6 +186,17 @@ class EpisodicTask:
         return th
 
     # -- episodes -----------------------------------------------------------------------
+    def episode_args(self, theta: Any, context: Any) -> tuple[np.ndarray, np.ndarray]:
+        """One episode's ``theta`` (n_params,) and ``context`` (d,) as floats, or a clear error."""
+        theta = np.asarray(theta, dtype=np.float64)
+        context = np.asarray(context, dtype=np.float64)
+        if theta.shape != (self.n_params,) or context.shape != (self.context_dim,):
+            raise ValueError(
+                f"{self.name}: theta must have shape ({self.n_params},) and context "
+                f"({self.context_dim},), got {theta.shape} and {context.shape}"
+            )
+        return theta, context
+
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         """Run one episode for ``theta`` (n_params,) in ``context`` (d,)."""
         raise NotImplementedError
