@@ -73,7 +73,7 @@ book: notebooks
 # pytest exits 5 when nothing is collected; that is not a failure of the suite.
 test: notebooks
 	VSLBOOK_BUDGET=smoke VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
-	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=1200 $(NB_IPY) ; \
+	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
 	  rc=$$?; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc
 	$(BIN)/ruff check .
 
