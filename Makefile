@@ -1,6 +1,8 @@
 # vslbook: two commands.
-#   make book   set up .venv and execute every notebook at $(VSLBOOK_BUDGET) (default: reduced)
-#   make test   set up .venv and run the tests, notebooks included, at the smoke budget
+#   make book   set up .venv and build the book site, every notebook executed at
+#               $(VSLBOOK_BUDGET) (default: reduced), into build/site/
+#   make test   set up .venv and run the tests, notebooks and the site's browser test
+#               included, at the smoke budget
 # Setup is idempotent: the stamp .venv/.installed is rebuilt only when pyproject.toml or
 # this Makefile changes.
 
@@ -15,6 +17,12 @@ MYO    := myosuite==3.0.0 myo-sim==0.2.3 termcolor colorednoise
 # The robot tasks of Chapters 3-4 read fancy-gym's MIT model files from its wheel; its Python
 # code needs mujoco 2.3.3 / gymnasium < 1 and is never imported (vslbook/envs/robot/assets.py).
 FANCY  := fancy-gym==0.3.0
+# The site typesets math with a MathJax copy it serves itself (offline); npm fetches it once.
+MATHJAX_VERSION := 3.2.2
+MATHJAX := $(VENV)/mathjax/node_modules/mathjax/es5/tex-chtml.js
+# The site's browser test drives Debian's chromium.
+CHROMIUM ?= /usr/bin/chromium
+SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
 VSLBOOK_BUDGET ?= reduced
@@ -22,12 +30,12 @@ export MPLBACKEND ?= Agg
 export MUJOCO_GL ?= disable
 export PYTHONHASHSEED := 0
 
-.PHONY: setup myo book test test-fast notebooks lab lint clean help
+.PHONY: setup myo book site test test-fast notebooks lab lint clean help browser
 .DEFAULT_GOAL := help
 
 help:
-	@echo "make book   execute the whole book at VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) into build/"
-	@echo "make test   run the test suite, notebooks included (smoke budget)"
+	@echo "make book   build the book site at VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) into build/site/"
+	@echo "make test   run the test suite, notebooks and the site browser test included (smoke budget)"
 	@echo "make lab    open JupyterLab on notebooks/"
 	@echo "make lint   ruff"
 
@@ -45,7 +53,18 @@ $(STAMP): pyproject.toml Makefile | $(BIN)/python
 	$(BIN)/python -m pip install --quiet --no-deps $(FANCY)
 	touch $(STAMP)
 
-setup: $(STAMP)
+$(MATHJAX): | $(BIN)/python
+	@command -v npm >/dev/null 2>&1 || { echo "need npm (Node.js) to fetch MathJax $(MATHJAX_VERSION)"; exit 1; }
+	npm install --prefix $(VENV)/mathjax --no-save --no-audit --no-fund --loglevel=error \
+	  mathjax@$(MATHJAX_VERSION)
+
+$(CHROMIUM):
+	$(SUDO) apt-get update -qq
+	DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium >/dev/null
+
+browser: $(CHROMIUM)
+
+setup: $(STAMP) $(MATHJAX)
 
 # MyoSuite's hand tasks alone (already part of setup); --no-deps keeps the pinned stack.
 myo: | $(BIN)/python
@@ -56,22 +75,16 @@ notebooks/%.ipynb: notebooks/%.py $(STAMP)
 
 notebooks: $(NB_IPY)
 
-book: notebooks
-	mkdir -p build/notebooks build/html build/figures
-	@for nb in $(NB_IPY); do \
-	  echo "== $$nb (budget $(VSLBOOK_BUDGET))"; \
-	  start=$$(date +%s); \
-	  VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) VSLBOOK_FIGURES=$(CURDIR)/build/figures \
-	    $(BIN)/jupyter nbconvert --to notebook --execute --ExecutePreprocessor.timeout=-1 \
-	    --output-dir build/notebooks $$nb || exit 1; \
-	  $(BIN)/jupyter nbconvert --to html --output-dir build/html \
-	    build/notebooks/$$(basename $$nb) >/dev/null 2>&1 || exit 1; \
-	  echo "   $$(( $$(date +%s) - start )) s"; \
-	done
-	@echo "book written to build/ (notebooks/, html/, figures/)"
+# The site: Sphinx + MyST-NB executes each notebook at the budget (cached per budget, so an
+# unchanged notebook is not run again) and ends by printing the page to open.
+book: setup
+	VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) VSLBOOK_FIGURES=$(CURDIR)/build/figures \
+	  $(BIN)/python book/build.py --budget $(VSLBOOK_BUDGET)
+
+site: book
 
 # pytest exits 5 when nothing is collected; that is not a failure of the suite.
-test: notebooks
+test: notebooks $(MATHJAX) browser
 	VSLBOOK_BUDGET=smoke VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
 	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
 	  rc=$$?; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc

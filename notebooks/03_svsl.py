@@ -65,6 +65,7 @@ def show(report):
 #
 # **The mixture (Eq. 3.1).** With gating $\pi(o\mid c)$ replaced by Bayes' rule,
 #
+# (eq-3-1)=
 # $$\pi(\theta\mid c)=\sum_o\frac{\pi(c\mid o)\,\pi(o)}{\pi(c)}\,\pi(\theta\mid c,o),\qquad
 # \pi(c)=\sum_o\pi(c\mid o)\,\pi(o). \tag{3.1}$$
 #
@@ -79,6 +80,7 @@ def show(report):
 # the model choose its own contexts, the thesis moves the outer expectation onto the model's
 # $\pi(c)$ and pays for leaving $p(c)$:
 #
+# (eq-3-3)=
 # $$J=\mathbb E_{\pi(c)}\Big[\mathbb E_{\pi(\theta|c)}[R(c,\theta)]+\alpha\,\mathcal H[\pi(\theta\mid c)]\Big]
 # -\beta\,\mathrm{KL}\big(\pi(c)\,\|\,p(c)\big). \tag{3.3}$$
 #
@@ -95,6 +97,7 @@ def show(report):
 # $\pi(c)\pi(\theta\mid c)=\sum_o\pi(o)\pi(c\mid o)\pi(\theta\mid c,o)$, and substitute the two
 # identities inside that sum:
 #
+# (eq-A-2)=
 # $$J=\sum_o\pi(o)\,\mathbb E_{\pi(c|o)}\Big[\mathbb E_{\pi(\theta|c,o)}\big[R-\alpha\log\pi(\theta\mid c,o)-\alpha\log\pi(o\mid c)+\alpha\log\pi(o\mid c,\theta)\big]
 # -\beta\log\pi(c\mid o)+\beta\log\pi(o\mid c)-\beta\log\pi(o)+\beta\log p(c)\Big]. \tag{A.2}$$
 #
@@ -102,6 +105,7 @@ def show(report):
 # $(\beta-\alpha)\log\pi(o\mid c)$ (A.3), and the remaining log-densities are entropies of the
 # single layers:
 #
+# (eq-3-4)=
 # $$J=\mathbb E_{\pi(o),\pi(c|o)}\Big[\mathbb E_{\pi(\theta|c,o)}[R+\alpha\log\pi(o\mid c,\theta)]
 # +\beta\log p(c)+(\beta-\alpha)\log\pi(o\mid c)\Big]
 # +\alpha\,\mathbb E\,\mathcal H[\pi(\theta\mid c,o)]+\beta\,\mathbb E_{\pi(o)}\mathcal H[\pi(c\mid o)]+\beta\,\mathcal H[\pi(o)]. \tag{3.4}$$
@@ -141,6 +145,7 @@ plt.show()
 # $\pi(o\mid\cdot)$, are KL divergences:
 #
 # $$J=\underbrace{\mathbb E_{\pi(o),\pi(c|o)}\Big[\mathbb E_{\pi(\theta|c,o)}[R+\alpha\log\tilde\pi(o\mid c,\theta)]+(\beta-\alpha)\log\tilde\pi(o\mid c)\Big]+\alpha\,\mathbb E\,\mathcal H[\pi(\theta|c,o)]+\beta\,\mathbb E\,\mathcal H[\pi(c|o)]+\beta\,\mathcal H[\pi(o)]}_{\textstyle \mathcal L(\pi;\tilde\pi)}$$
+# (eq-A-4)=
 # $$\qquad+\;\alpha\,\mathbb E_{\pi(c),\pi(\theta|c)}\big[\mathrm{KL}(\pi(o\mid c,\theta)\,\|\,\tilde\pi(o\mid c,\theta))\big]
 # +(\beta-\alpha)\,\mathbb E_{\pi(c)}\big[\mathrm{KL}(\pi(o\mid c)\,\|\,\tilde\pi(o\mid c))\big]. \tag{A.4}$$
 #
@@ -161,6 +166,7 @@ assert not bad.passed, "with beta < alpha the bound must break"
 # model and change one expert $\pi(\theta\mid c,o)$. Only three terms of $\mathcal L$ depend
 # on it, all multiplied by $\pi(o)$:
 #
+# (eq-3-5)=
 # $$\max_{\pi(\theta|c,o)}\;\mathbb E_{\pi(c|o),\pi(\theta|c,o)}\big[R(c,\theta)+\alpha\log\tilde\pi(o\mid c,\theta)\big]
 # +\alpha\,\mathbb E_{\pi(c|o)}\mathcal H[\pi(\theta\mid c,o)]. \tag{3.5}$$
 #
@@ -201,6 +207,7 @@ plt.show()
 #
 # Collecting the terms of $\mathcal L$ that depend on $\pi(c\mid o)$ (A.1.3):
 #
+# (eq-3-6)=
 # $$\max_{\pi(c|o)}\;\mathbb E_{\pi(c|o)}\big[L_c(o,c)+(\beta-\alpha)\log\tilde\pi(o\mid c)\big]+\beta\,\mathcal H[\pi(c\mid o)],\qquad
 # L_c(o,c)=\mathbb E_{\pi(\theta|c,o)}[R+\alpha\log\tilde\pi(o\mid c,\theta)]+\alpha\,\mathcal H[\pi(\theta\mid c,o)]. \tag{3.6}$$
 #
@@ -232,6 +239,7 @@ plt.show()
 # What is left of $\mathcal L$ as a function of $\pi(o)$ is a max-ent problem over a
 # categorical distribution:
 #
+# (eq-3-7)=
 # $$\max_{\pi(o)}\sum_o\pi(o)\,r_o+\beta\,\mathcal H[\pi(o)],\qquad
 # r_o=\mathbb E_{\pi(c|o)}\big[L_c(o,c)+(\beta-\alpha)\log\tilde\pi(o\mid c)\big]+\beta\,\mathcal H[\pi(c\mid o)]. \tag{3.7}$$
 #
@@ -313,7 +321,7 @@ vslbook.show_source(S.lower_bound)
 #
 # Each bound above is a maximum-entropy objective for one Gaussian (a context distribution,
 # Eq. 3.6) or one linear-Gaussian expert (Eq. 3.5). SVSL maximises it under a trust region
-# with MORE (Abdolmaleki et al., 2015): fit a quadratic $\tilde R(x)=-\tfrac12x^\top Ax+x^\top a+a_0$
+# with MORE {cite:p}`abdolmaleki2015model`: fit a quadratic $\tilde R(x)=-\tfrac12x^\top Ax+x^\top a+a_0$
 # to the augmented rewards of the expert's replay buffer, then solve
 #
 # $$\max_\pi\ \mathbb E_\pi[\tilde R]+\beta\,\mathcal H(\pi)\quad\text{s.t.}\quad
@@ -354,7 +362,7 @@ for eps in (1e-3, 1e-2, 1e-1):
 # The 10-link planar reacher (Appendix A.3.1, `vslbook.envs.robot.planar_reacher`) must put
 # its tip on a target $c\in[4.5,7]\times[-6,6]$ without touching three obstacles; θ are the
 # ten joint angles. We train SVSL as derived, SVSL with $\log\tilde\pi(o\mid c,\theta)$ and
-# $\log\tilde\pi(o\mid c)$ set to zero, and HiREPS (Daniel et al., 2012,
+# $\log\tilde\pi(o\mid c)$ set to zero, and HiREPS ({cite:t}`daniel2012hierarchical`,
 # `vslbook.erl.hireps`), then, as in the thesis, draw 100 experts from $\pi(o\mid c)$ for
 # each of six targets and plot the arms of the chosen experts' means (one colour per
 # expert), and each expert's context distribution (2σ ellipses, opacity ∝ π(o)).

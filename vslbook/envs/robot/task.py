@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import os
+import signal
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
@@ -324,6 +325,10 @@ _WORKER_TASK: EpisodicTask | None = None
 
 def _worker_init(cls: type[EpisodicTask], kwargs: dict[str, Any]) -> None:
     global _WORKER_TASK
+    # Ctrl-C (or a Jupyter kernel's interrupt) goes to the whole process group: the parent
+    # handles it and shuts the pool down; a worker that also raised would only print a
+    # KeyboardInterrupt traceback per process.
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     try:
         import torch

@@ -1,0 +1,165 @@
+"""The book site in a real browser: build it at the smoke budget, open every page in
+headless Chromium (Debian's ``chromium``, driven by Playwright without a downloaded
+browser) and check what a reader sees.
+
+Per page: no raw ``$$`` or ``\\begin{`` left in the rendered text (MathJax typeset all
+math), every image loaded, no console error or uncaught exception, no request to any host
+but the local server (the site works offline), and every thesis-numbered equation anchor
+(``#eq-N-M``) holds typeset math. One screenshot per page (plus its first equation and
+its first figure, where it has them) goes to ``build/screenshots/``.
+"""
+
+from __future__ import annotations
+
+import functools
+import http.server
+import os
+import shutil
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SITE = ROOT / "build" / "site-smoke"
+SHOTS = ROOT / "build" / "screenshots"
+CHROMIUM = os.environ.get("VSLBOOK_CHROMIUM", "/usr/bin/chromium")
+# The flags the site's browser runs with (fresh profile: Playwright makes one per launch).
+CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run",
+                 "--disable-background-networking", "--disable-component-update",
+                 "--disable-sync", "--disable-quic"]
+
+pytestmark = pytest.mark.slow
+
+# Text left in the page after MathJax ran, with code, program output and the typeset math
+# removed: any raw TeX still in it was not typeset.
+_PROSE = """() => {
+  const body = document.body.cloneNode(true);
+  body.querySelectorAll('pre, code, script, style, mjx-container, .cell_output')
+      .forEach(e => e.remove());
+  return body.innerText;
+}"""
+_IMAGES = """() => Array.from(document.images).map(i => ({src: i.currentSrc || i.src,
+  ok: i.complete && i.naturalWidth > 0}))"""
+_ANCHORS = """() => Array.from(document.querySelectorAll('[id^="eq-"]')).map(e => ({
+  id: e.id, typeset: e.querySelector('mjx-container') !== null
+    || (e.nextElementSibling && e.nextElementSibling.querySelector('mjx-container') !== null)
+}))"""
+
+
+@pytest.fixture(scope="module")
+def site() -> Path:
+    """Build the smoke site (notebooks executed, cached by content) and return its folder."""
+    if not Path(CHROMIUM).is_file():
+        pytest.fail(f"no Chromium at {CHROMIUM}: `make setup` installs Debian's chromium "
+                    "(or set VSLBOOK_CHROMIUM)")
+    env = {**os.environ, "VSLBOOK_BUDGET": "smoke"}
+    subprocess.run([sys.executable, str(ROOT / "book" / "build.py"), "--budget", "smoke", "-q"],
+                   check=True, cwd=ROOT, env=env)
+    assert (SITE / "index.html").is_file()
+    return SITE
+
+
+@pytest.fixture(scope="module")
+def server(site: Path):
+    handler = functools.partial(_QuietHandler, directory=str(site))
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), handler)
+    thread = threading.Thread(target=httpd.serve_forever, daemon=True)
+    thread.start()
+    yield f"http://127.0.0.1:{httpd.server_address[1]}"
+    httpd.shutdown()
+
+
+class _QuietHandler(http.server.SimpleHTTPRequestHandler):
+    def log_message(self, *args) -> None:  # keep pytest's output readable
+        pass
+
+
+@pytest.fixture(scope="module")
+def browser():
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as pw:
+        b = pw.chromium.launch(executable_path=CHROMIUM, args=CHROMIUM_ARGS, headless=True)
+        yield b
+        b.close()
+
+
+def _pages(site: Path) -> list[str]:
+    return sorted(p.name for p in site.glob("*.html"))
+
+
+def test_site_has_the_chapters_and_bibliography(site: Path):
+    pages = set(_pages(site))
+    for name in ("index.html", "02_foundations.html", "03_svsl.html", "05_dime.html",
+                 "bibliography.html"):
+        assert name in pages, f"{name} missing from the site: {sorted(pages)}"
+    # MathJax is served by the site itself
+    assert (site / "_static" / "mathjax" / "tex-chtml.js").is_file()
+    assert "cdn.jsdelivr" not in (site / "02_foundations.html").read_text()
+
+
+# Pages whose notebooks draw figures: each must show at least one.
+FIGURE_PAGES = ("02_foundations.html", "03_svsl.html", "05_dime.html")
+
+
+def test_every_page_renders_offline(site: Path, server: str, browser):
+    if SHOTS.exists():
+        shutil.rmtree(SHOTS)
+    SHOTS.mkdir(parents=True)
+    problems: list[str] = []
+    for name in _pages(site):
+        problems += _check_page(browser, f"{server}/{name}", name, server)
+    assert not problems, "\n".join(problems)
+
+
+def _check_page(browser, url: str, name: str, server: str) -> list[str]:
+    page = browser.new_page(viewport={"width": 1280, "height": 900})
+    errors: list[str] = []
+    outside: list[str] = []
+    page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
+    page.on("pageerror", lambda e: errors.append(str(e)))
+
+    def route(r):
+        if r.request.url.startswith(server) or r.request.url.startswith("data:"):
+            r.continue_()
+        else:
+            outside.append(r.request.url)
+            r.abort()
+
+    page.route("**/*", route)
+    page.goto(url, wait_until="networkidle")
+    has_mathjax = page.evaluate("() => typeof MathJax !== 'undefined'")
+    if has_mathjax:
+        page.evaluate("() => MathJax.startup.promise")
+        page.wait_for_load_state("networkidle")
+    stem = Path(name).stem
+    problems = [f"{name}: console error: {e}" for e in errors]
+    problems += [f"{name}: fetched from outside the site: {u}" for u in outside]
+    prose = page.evaluate(_PROSE)
+    for raw in ("$$", "\\begin{"):
+        if raw in prose:
+            at = prose.index(raw)
+            problems.append(f"{name}: raw {raw!r} in the text: ...{prose[at - 60:at + 60]!r}")
+    images = page.evaluate(_IMAGES)
+    if name in FIGURE_PAGES and not images:
+        problems.append(f"{name}: no figure on the page")
+    for img in images:
+        if not img["ok"]:
+            problems.append(f"{name}: image not loaded: {img['src'][:120]}")
+    for anchor in page.evaluate(_ANCHORS):
+        if not anchor["typeset"]:
+            problems.append(f"{name}: equation anchor #{anchor['id']} holds no typeset math")
+    page.screenshot(path=str(SHOTS / f"{stem}.png"))
+    equation = page.locator("mjx-container[display='true']")
+    if equation.count():
+        equation.first.scroll_into_view_if_needed()
+        page.screenshot(path=str(SHOTS / f"{stem}-equation.png"))
+    figure = page.locator(".cell_output img")
+    if figure.count():
+        figure.first.scroll_into_view_if_needed()
+        page.screenshot(path=str(SHOTS / f"{stem}-figure.png"))
+    page.close()
+    return problems
