@@ -15,14 +15,16 @@
 #
 # A diffusion policy can represent multimodal action distributions, but its marginal
 # density $\pi(a\mid s)$ — and hence its entropy — is intractable, which seems to rule out
-# the maximum-entropy objective (Eq. 2.39). DIME's way out: treat the denoising chain
+# the maximum-entropy objective ([Eq. 2.39](#eq-2-39)). DIME's way out: treat the denoising chain
 # $x^N\to\dots\to x^0=a$ as a latent-variable model and bound the entropy from below by
 # comparing it with a *noising* chain, exactly as Section 2.7.3 bounds a marginal KL by a
 # joint one. Everything the actor and the critic need is then a sum of Gaussian
 # log-densities along the sampled chain.
 #
-# 1. The entropy lower bound ℓ (Eq. 5.15) and its gap (Eq. 5.18–5.20), checked in closed form
-# 2. Soft policy iteration with the bound (Eq. 5.21, Props. 5.4.1–5.4.3)
+# 1. The entropy lower bound ℓ ([Eq. 5.15](#eq-5-15), Appendix C.1), its gap and the inference
+#    problem it leads to ([Eqs. 5.16–5.20](#eq-5-18)), checked in closed form
+# 2. Soft policy iteration with the bound ([Eq. 5.21](#eq-5-21), Props. 5.4.1–5.4.3, Appendix C.2)
+# 2b. The practical losses of critic, actor and temperature ([Eqs. 5.24–5.28](#eq-5-24))
 # 3. Fig. 5.1 — what α does to the denoising chain (live)
 # 4. Figs. 5.2a–b / 5.3 — all 13 published panels; our cheetah-run next to its published curve
 # 5. Ablations (Figs. 5.2c, 5.4, 5.6, 5.8, C.2) and the point-mass study (Fig. 5.7) at the active budget
@@ -80,19 +82,195 @@ for use, name in LIVE.items():
 # %% [markdown]
 # ## 1. The entropy lower bound
 #
-# The policy samples $x^N\sim p_N=\mathcal N(0,\sigma_0^2I)$ and runs $N$ Euler–Maruyama steps
-# of a learned denoising SDE, $x^{n-1}=x^n+\eta_n(\nabla\log p_N(x^n)+f_\theta(x^n,n,s))+\sqrt{2\eta_n}\,\varepsilon$.
-# Call this joint $\pi(x^{0:N})$. A *noising* chain $\vec\pi$ runs the other way with the fixed
-# OU kernels $x^n\sim\mathcal N(x^{n-1}+\eta_n\nabla\log p_N(x^{n-1}),2\eta_n)$, started at
-# the policy's own marginal $\pi_0$. By the chain rule of the KL (Eq. 2.60 with $z=x^{1:N}$),
+# ### 1.1 Two chains: noising and denoising
 #
-# $$\mathcal H(\pi_0)=\underbrace{\mathbb E_\pi\Big[\textstyle\sum_n\log\vec\pi_{n|n-1}(x^n\mid x^{n-1})-\log p_N(x^N)-\sum_n\log\pi_{n-1|n}(x^{n-1}\mid x^n)\Big]}_{\ell\ \text{(Eq. 5.15)}}+\mathrm{KL}\big(\pi(x^{0:N})\,\|\,\vec\pi(x^{0:N})\big),$$
+# Fix a state $\mathbf s$. The thesis starts from an Ornstein–Uhlenbeck process in *diffusion
+# time* $t\in[0,T]$ (not RL time) that gradually turns an action into noise,
 #
-# so $\ell\le\mathcal H$ with the gap the KL between the two chains (Eq. 5.18–5.20), and $\ell$
-# needs only the Gaussian kernels along one sampled chain. When $f_\theta$ is linear the
-# chain is linear-Gaussian: $\mathcal H$, $\ell$ and the gap are all closed form. The check
-# runs the library's `DiffusionPolicy` with such a score network and compares the Monte-Carlo
-# estimate of its `entropy_bound` with the closed forms.
+# (eq-5-7)=
+# $$
+# d\mathbf a_t=-\beta_t\mathbf a_t\,dt+\eta\sqrt{2\beta_t}\,dB_t,\qquad \mathbf a_0\sim\vec\pi_0(\cdot\mid\mathbf s), \tag{5.7}
+# $$
+#
+# with diffusion coefficient $\beta_t>0$ and Brownian motion $B_t$; for a large enough
+# $\int_0^T\beta_t\,dt$ its marginal at $T$ is close to $\mathcal N(0,\eta^2I)$. Its time
+# reversal, started at that Gaussian and run from $T$ back to $0$, passes through the same
+# marginals $\vec\pi_t$ and ends at $\vec\pi_0$; it needs the scores of those marginals:
+#
+# (eq-5-8)=
+# $$
+# d\mathbf a_t=\big(-\beta_t\mathbf a_t-2\eta^2\beta_t\nabla\log\vec\pi_t(\mathbf a_t\mid\mathbf s)\big)dt+\eta\sqrt{2\beta_t}\,dB_t . \tag{5.8}
+# $$
+#
+# A diffusion policy replaces the unknown scores by a network and samples an action by
+# running Eq. 5.8. With a step $\delta$ and $N=T/\delta$ steps, the Euler–Maruyama steps of the
+# two processes are, with $\epsilon_n,\xi_n\sim\mathcal N(0,2\eta^2\beta_n\delta I)$,
+#
+# (eq-5-11b)=
+# $$
+# \mathbf a^{n+1}=\mathbf a^n-\beta_n\mathbf a^n\delta+\epsilon_n, \tag{5.11b}
+# $$
+#
+# (eq-5-12)=
+# $$
+# \mathbf a^{n-1}=\mathbf a^n+\big(\beta_n\mathbf a^n+2\eta^2\beta_n\nabla\log\tilde\pi_n(\mathbf a^n\mid\mathbf s)\big)\delta+\xi_n . \tag{5.12}
+# $$
+#
+# (The thesis prints this noising step and the objective of Section 1.4 both as Eq. 5.11; here
+# the step is 5.11b.) Superscripts count diffusion steps: $\mathbf a^N$ is the noise and
+# $\mathbf a^0$ the action. Each step is a Gaussian kernel, so the two discrete chains have the
+# joint densities
+#
+# (eq-5-13)=
+# $$
+# \vec\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)=\vec\pi_0(\mathbf a^0\mid\mathbf s)\prod_{n=0}^{N-1}\vec\pi_{n+1|n}(\mathbf a^{n+1}\mid\mathbf a^n,\mathbf s), \tag{5.13}
+# $$
+#
+# (eq-5-14)=
+# $$
+# \tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)=\tilde\pi_N(\mathbf a^N\mid\mathbf s)\prod_{n=1}^{N}\tilde\pi_{n-1|n}(\mathbf a^{n-1}\mid\mathbf a^n,\mathbf s), \tag{5.14}
+# $$
+#
+# the noising chain $\vec\pi$ read from the action to the noise and the denoising (generative)
+# chain $\tilde\pi$ read the other way, with $\tilde\pi_N=\mathcal N(0,\eta^2I)$.
+#
+# **The same chains in the library.** `DiffusionPolicy` writes the chain as
+# $x^{n-1}=x^n+\eta_n\big(\nabla\log p_N(x^n)+f_\theta(x^n,n,\mathbf s)\big)+\sqrt{2\eta_n}\,\varepsilon$ with
+# the prior $p_N=\mathcal N(0,\sigma_0^2I)$, $\nabla\log p_N(x)=-x/\sigma_0^2$, and its noising
+# kernel as $x^n\sim\mathcal N\big(x^{n-1}+\eta_n\nabla\log p_N(x^{n-1}),\,2\eta_n\big)$. The
+# dictionary is $x^n=\mathbf a^n$, $\sigma_0=\eta$ (the thesis's $\eta$ is the prior's standard
+# deviation) and the library's step size $\eta_n=\sigma_0^2\beta_n\delta$: then the noising
+# kernel has mean $\mathbf a^{n-1}-\beta_n\delta\,\mathbf a^{n-1}$ and variance
+# $2\sigma_0^2\beta_n\delta$, which is Eq. 5.11b, and the denoising mean
+# $x^n-\beta_n\delta\,x^n+\sigma_0^2\beta_n\delta\,f_\theta$ equals Eq. 5.12's exactly when
+# $f_\theta=2(\nabla\log\tilde\pi_n-\nabla\log p_N)$. So $f_\theta\equiv0$, its initial value,
+# keeps the prior.
+#
+# ### 1.2 The bound (Appendix C.1)
+#
+# The action's density $\tilde\pi_0(\mathbf a^0\mid\mathbf s)$ is the marginal of Eq. 5.14, an
+# $N$-fold integral nobody can evaluate, and so is its entropy. Drop $\mathbf s$ from the
+# notation for this subsection. The definition of a conditional density gives, for every
+# $\mathbf a^{1:N}$,
+#
+# (eq-C-3)=
+# $$
+# \tilde\pi_0(\mathbf a^0)=\frac{\tilde\pi_{0:N}(\mathbf a^{0:N})}{\tilde\pi_{1:N|0}(\mathbf a^{1:N}\mid\mathbf a^0)} . \tag{C.3}
+# $$
+#
+# The entropy is $-\mathbb E_{\tilde\pi_0}[\log\tilde\pi_0(\mathbf a^0)]$. Because Eq. C.3
+# holds whatever $\mathbf a^{1:N}$ is, we may draw the whole chain and average over it instead
+# of over $\mathbf a^0$ alone:
+#
+# (eq-C-1)=
+# $$
+# \mathcal H(\tilde\pi_0)=-\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\tilde\pi_{0:N}(\mathbf a^{0:N})}{\tilde\pi_{1:N|0}(\mathbf a^{1:N}\mid\mathbf a^0)}\Big]. \tag{C.1}
+# $$
+#
+# The posterior $\tilde\pi_{1:N|0}$ of the chain given the action is as intractable as the
+# marginal. The noising chain's conditional
+# $\vec\pi_{1:N|0}=\prod_{n=1}^N\vec\pi_{n|n-1}$, however, is a product of known Gaussian
+# kernels. Multiply and divide by it inside the logarithm and split the logarithm in two:
+#
+# (eq-C-2)=
+# $$
+# \begin{aligned}
+# \mathcal H(\tilde\pi_0)&=-\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\tilde\pi_{0:N}\,\vec\pi_{1:N|0}}{\tilde\pi_{1:N|0}\,\vec\pi_{1:N|0}}\Big]
+# =\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\vec\pi_{1:N|0}}{\tilde\pi_{0:N}}\Big]+\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\tilde\pi_{1:N|0}}{\vec\pi_{1:N|0}}\Big]\\
+# &=\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\vec\pi_{1:N|0}}{\tilde\pi_{0:N}}\Big]+\mathbb E_{\tilde\pi_0}\Big[D_{\mathrm{KL}}\big(\tilde\pi_{1:N|0}(\cdot\mid\mathbf a^0)\,\big\|\,\vec\pi_{1:N|0}(\cdot\mid\mathbf a^0)\big)\Big]
+# \;\ge\;\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\vec\pi_{1:N|0}}{\tilde\pi_{0:N}}\Big].
+# \end{aligned} \tag{C.2}
+# $$
+#
+# In the second expectation the joint was split as $\tilde\pi_{0:N}=\tilde\pi_0\,\tilde\pi_{1:N|0}$;
+# integrating over $\mathbf a^{1:N}$ first leaves, for each action, a KL divergence between the
+# two conditionals, which is never negative. Dropping it gives the bound
+# $\mathcal H(\tilde\pi_0(\cdot\mid\mathbf s))\ge\ell_{\tilde\pi}(\mathbf a^0,\mathbf s)$ with
+#
+# (eq-5-15)=
+# $$
+# \ell_{\tilde\pi}(\mathbf a^0,\mathbf s)=\mathbb E_{\tilde\pi_{0:N}}\Big[\log\frac{\vec\pi_{1:N|0}(\mathbf a^{1:N}\mid\mathbf a^0,\mathbf s)}{\tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)}\Big]. \tag{5.15}
+# $$
+#
+# The expectation runs over the whole chain, the action included, so $\ell$ is a number per
+# state; the thesis keeps $\mathbf a^0$ in the name. Three readings of Eq. C.2:
+#
+# * **The gap.** $\mathcal H-\ell=\mathbb E_{\tilde\pi_0}[D_{\mathrm{KL}}(\tilde\pi_{1:N|0}\|\vec\pi_{1:N|0})]=D_{\mathrm{KL}}\big(\tilde\pi_{0:N}\,\|\,\tilde\pi_0\,\vec\pi_{1:N|0}\big)$,
+#   the KL between the denoising chain and the noising chain *started at the policy's own
+#   action marginal* (two joints with the same $\mathbf a^0$-marginal differ only through their
+#   conditionals). It is zero exactly when the denoising chain is the time reversal of that
+#   noising chain. The same statement is the data-processing inequality of
+#   {cite:p}`cover1999elements`: the KL between the two joints is at least the KL between their
+#   $\mathbf a^0$-marginals, which here is zero. Bounds of this auxiliary-variable kind go back
+#   to {cite:p}`agakov2004auxiliary`.
+# * **What one chain estimates.** Inserting the factorisations 5.13 and 5.14,
+#
+#   $$
+#   \ell=\mathbb E_{\tilde\pi_{0:N}}\Big[\sum_{n=1}^N\log\vec\pi_{n|n-1}(\mathbf a^n\mid\mathbf a^{n-1})-\log\tilde\pi_N(\mathbf a^N)-\sum_{n=1}^N\log\tilde\pi_{n-1|n}(\mathbf a^{n-1}\mid\mathbf a^n)\Big],
+#   $$
+#
+#   a sum of Gaussian log-densities along a sampled chain. One chain gives an unbiased estimate
+#   $\hat\ell$; the library returns it as `entropy_bound` $=-$(`running_cost` + `terminal_cost`),
+#   with `terminal_cost` $=\log\tilde\pi_N(\mathbf a^N)$ and `running_cost`
+#   $=\sum_n[\log\tilde\pi_{n-1|n}-\log\vec\pi_{n|n-1}]$.
+# * **Per sample**, $\log\tilde\pi_{1:N|0}/\vec\pi_{1:N|0}=-\hat\ell-\log\tilde\pi_0(\mathbf a^0)$,
+#   so where the marginal is known the gap has a Monte-Carlo estimate too.
+#
+# **Check.** A one-dimensional chain with $N=3$ steps and an affine network
+# $f_\theta(x)=\text{slope}\cdot x+\text{offset}$ is linear-Gaussian, so $\mathcal H$, $\ell$ and the
+# gap have closed forms. The cell runs the chain with the recursion of Eq. 5.12 in the
+# library's units, accumulates the log ratio of Eq. 5.15 from the Gaussian kernels written
+# in the cell, and propagates the marginal's moments, $m\leftarrow c_nm+\eta_n\,\text{offset}$,
+# $v\leftarrow c_n^2v+2\eta_n$ with $c_n=1+\eta_n(\text{slope}-1/\sigma_0^2)$, for
+# $\mathcal H(\tilde\pi_0)=\tfrac12\log(2\pi e v)$. The package's `linear_gaussian_chain` gives
+# the other side from the means and covariances of both joints.
+
+# %%
+sigma0, slope, offset = 1.5, -0.8, 1.5
+etas = np.array([0.4, 0.3, 0.2])  # library step sizes η_n = σ0² β_n δ, sampling order a^3 -> a^0
+n_mc = 200_000
+rng = np.random.default_rng(0)
+
+
+def log_normal(x, mean, var):
+    return -0.5 * ((x - mean) ** 2 / var + np.log(2 * np.pi * var))
+
+
+def stderr(x):
+    return x.std(ddof=1) / np.sqrt(x.size)
+
+
+a = sigma0 * rng.standard_normal(n_mc)  # a^N ~ π̃_N = N(0, σ0²)
+log_ratio = -log_normal(a, 0.0, sigma0**2)  # running sum of the log ratio in Eq. 5.15
+mean, var = 0.0, sigma0**2  # moments of the current a^n
+for eta in etas:
+    gen_mean = a + eta * (-a / sigma0**2 + slope * a + offset)
+    a_next = gen_mean + np.sqrt(2 * eta) * rng.standard_normal(n_mc)  # Eq. 5.12: a^{n-1}
+    noising_mean = a_next - eta * a_next / sigma0**2  # Eq. 5.11b: mean of a^n given a^{n-1}
+    log_ratio += log_normal(a, noising_mean, 2 * eta) - log_normal(a_next, gen_mean, 2 * eta)
+    c = 1 + eta * (slope - 1 / sigma0**2)
+    mean, var = c * mean + eta * offset, c**2 * var + 2 * eta
+    a = a_next
+entropy = 0.5 * np.log(2 * np.pi * np.e * var)  # H(π̃_0) of the Gaussian marginal
+gap_samples = -log_ratio - log_normal(a, mean, var)  # log π̃_{1:N|0} / π⃗_{1:N|0} per chain
+
+chain = D.linear_gaussian_chain(etas[:, None], sigma0, slope, offset)  # package: closed forms
+print(f"ℓ   Monte Carlo {log_ratio.mean():.4f} ± {stderr(log_ratio):.4f}   closed form {chain.bound[0]:.4f}")
+print(f"H   by hand     {entropy:.4f}            closed form {chain.entropy[0]:.4f}")
+print(f"gap Monte Carlo {gap_samples.mean():.4f} ± {stderr(gap_samples):.4f}   "
+      f"H − ℓ = {entropy - chain.bound[0]:.4f}   joint KL {chain.kl[0]:.4f}")
+assert abs(log_ratio.mean() - chain.bound[0]) < 5 * stderr(log_ratio)  # Eq. 5.15
+assert abs(entropy - chain.entropy[0]) < 1e-9
+assert chain.bound[0] <= entropy  # Eq. C.2
+assert abs((entropy - chain.bound[0]) - chain.kl[0]) < 1e-9  # gap = joint KL
+assert abs(gap_samples.mean() - chain.kl[0]) < 5 * stderr(gap_samples)
+
+# %% [markdown]
+# The library's own check does the same on `DiffusionPolicy.sample` itself (two action
+# dimensions, DIME's cosine step schedule), compares the estimate with the log ratio
+# recomputed from the documented kernels, and repeats it for $N=1,\dots,16$ steps at a fixed
+# total time: with $f_\theta\equiv0$ the chain keeps the prior and the gap shrinks as the steps
+# get finer, while a network that moves the marginal leaves a gap that does not vanish.
 
 # %%
 vslbook.show_source(vslbook.srl.diffusion_policy.DiffusionPolicy.sample)
@@ -114,14 +292,474 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown]
+# ### 1.3 Bounded actions: the tanh correction (Appendix C.4)
+#
+# Robot actions lie in $(-1,1)^D$, a diffusion chain does not. The chain therefore runs on
+# $\mathbf u\in\mathbb R^D$ with density $\tilde q$, and the action is $\mathbf a^0=\tanh\mathbf u^0$.
+# Replacing the last variable $\mathbf u^0$ by $\mathbf a^0$, a bijection, the density picks up
+# the inverse Jacobian determinant,
+#
+# (eq-C-29)=
+# $$
+# \tilde\pi_{0:N}(\mathbf a^0,\mathbf u^{1:N}\mid\mathbf s)=\tilde q_{0:N}(\mathbf u^{0:N}\mid\mathbf s)\,\Big|\det\frac{d\mathbf a^0}{d\mathbf u^0}\Big|^{-1}, \tag{C.29}
+# $$
+#
+# and since the Jacobian of an elementwise tanh is diagonal with entries
+# $1-\tanh^2(u^0_i)$,
+#
+# (eq-C-30)=
+# $$
+# \log\tilde\pi_{0:N}=\log\tilde q_N(\mathbf u^N)+\sum_{n=1}^N\log\tilde q_{n-1|n}(\mathbf u^{n-1}\mid\mathbf u^n,\mathbf s)-\sum_{i=1}^D\log\big(1-\tanh^2(u^0_i)\big). \tag{C.30}
+# $$
+#
+# (The thesis writes $u^N_i$ in the last sum; the correction belongs to the step that makes the
+# action, $n=0$, as its text says and as the library does.) The noising conditional depends on
+# $\mathbf u^0=\operatorname{artanh}\mathbf a^0$ only and is unchanged. In Eq. 5.15 only the
+# correction is new:
+#
+# $$
+# \ell_{\tanh}=\ell_{\mathbf u}+\mathbb E\Big[\sum_i\log\big(1-\tanh^2(u^0_i)\big)\Big],\qquad
+# \mathcal H(\tanh_\#\tilde q_0)=\mathcal H(\tilde q_0)+\mathbb E\Big[\sum_i\log\big(1-\tanh^2(u^0_i)\big)\Big],
+# $$
+#
+# the second identity being the same change of variables applied to the marginal. The
+# correction enters both sides equally, so the gap is the same KL as without the squashing.
+# This is why `running_cost` subtracts `tanh_log_det_jacobian`.
+#
+# **Check.** For the chain above, the cell integrates the squashed density
+# $p(a)=\mathcal N(\operatorname{artanh}a;m,v)/(1-a^2)$ on a fine grid of $(-1,1)$ for
+# $\mathcal H$. The package side is the closed-form $\ell_{\mathbf u}$ plus the mean of
+# `tanh_log_det_jacobian` over the chain's samples of $\mathbf u^0$. The gap must again
+# equal the closed-form KL.
+
+# %%
+from vslbook.srl.diffusion_policy import tanh_log_det_jacobian
+
+log_det = tanh_log_det_jacobian(torch.from_numpy(a)[:, None]).numpy()  # package, per sample
+bound_tanh = chain.bound[0] + log_det.mean()
+grid = np.linspace(-1.0, 1.0, 400_001)[1:-1]
+density = np.exp(log_normal(np.arctanh(grid), mean, var)) / (1 - grid**2)  # Eq. C.29, by hand
+entropy_tanh = -np.trapezoid(density * np.log(density), grid)
+print(f"H(tanh a^0) by quadrature {entropy_tanh:.4f} (mass {np.trapezoid(density, grid):.5f});  "
+      f"ℓ_tanh = {bound_tanh:.4f} ± {stderr(log_det):.4f}")
+print(f"gap {entropy_tanh - bound_tanh:.4f}   vs   the unsquashed joint KL {chain.kl[0]:.4f}")
+assert bound_tanh <= entropy_tanh
+assert abs((entropy_tanh - bound_tanh) - chain.kl[0]) < 5 * stderr(log_det)
+
+# %% [markdown]
+# ### 1.4 From the entropy to an inference problem
+#
+# The maximum-entropy objective of a diffusion policy, started at RL time $l$, is
+#
+# (eq-5-11)=
+# $$
+# J(\tilde\pi)=\sum_{t=l}^{\infty}\gamma^{t-l}\,\mathbb E_{\rho_{\tilde\pi}}\big[r_t(\mathbf s_t,\mathbf a^0_t)+\alpha\,\mathcal H\big(\tilde\pi_0(\cdot\mid\mathbf s_t)\big)\big] \tag{5.11}
+# $$
+#
+# (subscripts: RL time; superscripts: diffusion steps). As in the thesis, $\alpha$ is absorbed
+# into the reward from here on, $r_t\triangleq r(\mathbf s_t,\mathbf a^0_t)$, and comes back in
+# Section 2b. Since $\ell\le\mathcal H$ at every state and every weight $\gamma^{t-l}$ is
+# positive, replacing the entropy by the bound term by term can only lower the objective:
+#
+# (eq-5-16)=
+# $$
+# J(\tilde\pi)\ge\bar J(\tilde\pi)=\sum_{t=l}^{\infty}\gamma^{t-l}\,\mathbb E_{\rho_{\tilde\pi}}\big[r_t+\ell_{\tilde\pi}(\mathbf a^0_t,\mathbf s_t)\big]. \tag{5.16}
+# $$
+#
+# Its Q-function collects the first reward and then rewards plus bounds of all later steps:
+#
+# (eq-5-17)=
+# $$
+# Q^{\tilde\pi}(\mathbf s_t,\mathbf a^0_t)=r_t+\sum_{l=1}^{\infty}\gamma^l\,\mathbb E_{\rho_{\tilde\pi}}\big[r_{t+l}+\ell_{\tilde\pi}(\mathbf a^0_{t+l},\mathbf s_{t+l})\big]. \tag{5.17}
+# $$
+#
+# Appendix C.1 restates Eqs. 5.17 and 5.15 as Eqs. C.4 and C.5 and starts from Eq. 5.16 (its
+# Eq. C.6). Take the first step out of the sum,
+#
+# (eq-C-7)=
+# $$
+# \bar J(\tilde\pi)=\mathbb E_{\rho_{\tilde\pi}}\big[r_l+\ell_{\tilde\pi}(\mathbf a^0_l,\mathbf s_l)\big]+\sum_{t=l+1}^{\infty}\gamma^{t-l}\,\mathbb E_{\rho_{\tilde\pi}}\big[r_t+\ell_{\tilde\pi}(\mathbf a^0_t,\mathbf s_t)\big]. \tag{C.7}
+# $$
+#
+# The reward at $l$ plus the whole second sum is, by Eq. 5.17 with $t=l$, the Q-value of the
+# first pair, so
+#
+# (eq-C-8)=
+# $$
+# \bar J(\tilde\pi)=\mathbb E_{\rho_{\tilde\pi}}\big[Q^{\tilde\pi}(\mathbf s_l,\mathbf a^0_l)\big]+\mathbb E_{\rho_{\tilde\pi}}\big[\ell_{\tilde\pi}(\mathbf a^0_l,\mathbf s_l)\big]
+# =\mathbb E_{\rho_{\tilde\pi}}\big[Q^{\tilde\pi}(\mathbf s_l,\mathbf a^0_l)+\ell_{\tilde\pi}(\mathbf a^0_l,\mathbf s_l)\big]. \tag{C.8}
+# $$
+#
+# (The thesis writes the two forms as Eqs. C.8 and C.9.) Now write $\ell$ out with Eq. 5.15
+# and put both terms under one expectation over the state and the chain:
+#
+# (eq-C-10)=
+# $$
+# \bar J(\tilde\pi)=\mathbb E_{\rho_{\tilde\pi}}\,\mathbb E_{\tilde\pi_{0:N}}\Big[Q^{\tilde\pi}(\mathbf s,\mathbf a^0)+\log\frac{\vec\pi_{1:N|0}(\mathbf a^{1:N}\mid\mathbf a^0,\mathbf s)}{\tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)}\Big]. \tag{C.10}
+# $$
+#
+# (The thesis's Eq. C.10 has $\tilde\pi_{1:N|0}$ in the numerator; by Eq. 5.15 it is the noising
+# conditional $\vec\pi_{1:N|0}$.) Define the Boltzmann policy of this Q-function,
+#
+# (eq-5-19)=
+# $$
+# \vec\pi_0(\mathbf a^0\mid\mathbf s)=\frac{\exp Q^{\tilde\pi}(\mathbf s,\mathbf a^0)}{\mathcal Z^{\tilde\pi}(\mathbf s)}, \tag{5.19}
+# $$
+#
+# (restated as Eq. C.12), so that $Q^{\tilde\pi}=\log\vec\pi_0+\log\mathcal Z^{\tilde\pi}$. Then
+# $\exp Q^{\tilde\pi}\cdot\vec\pi_{1:N|0}=\mathcal Z^{\tilde\pi}\,\vec\pi_{0:N}$: the numerator is, up
+# to the constant $\mathcal Z$, the noising chain of Eq. 5.13 started at the Boltzmann policy,
+# and
+#
+# (eq-C-11)=
+# $$
+# \bar J(\tilde\pi)=-\mathbb E_{\rho_{\tilde\pi}}\Big[D_{\mathrm{KL}}\big(\tilde\pi_{0:N}(\cdot\mid\mathbf s)\,\big\|\,\vec\pi_{0:N}(\cdot\mid\mathbf s)\big)-\log\mathcal Z^{\tilde\pi}(\mathbf s)\Big]. \tag{C.11}
+# $$
+#
+# The partition function does not depend on the policy's chain, so at every state maximising
+# $\bar J$ means minimising
+#
+# (eq-5-18)=
+# $$
+# \bar{\mathcal L}(\tilde\pi)=D_{\mathrm{KL}}\big(\tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\,\big\|\,\vec\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\big), \tag{5.18}
+# $$
+#
+# which is zero exactly when the denoising chain is the time reversal of the noising chain
+# that starts at $\exp Q^{\tilde\pi}/\mathcal Z^{\tilde\pi}$, and then its action marginal is that
+# Boltzmann policy. The chain rule of the KL ([Eq. 2.60](#eq-2-60)) splits the joint KL into
+# the KL of the $\mathbf a^0$-marginals plus the expected KL of the conditionals, so
+#
+# (eq-5-20)=
+# $$
+# D_{\mathrm{KL}}\Big(\tilde\pi_0(\mathbf a^0\mid\mathbf s)\,\Big\|\,\frac{\exp Q^{\tilde\pi}(\mathbf s,\mathbf a^0)}{\mathcal Z^{\tilde\pi}(\mathbf s)}\Big)\le D_{\mathrm{KL}}\big(\tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\,\big\|\,\vec\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\big): \tag{5.20}
+# $$
+#
+# Eq. 5.18 is an upper bound on SAC's improvement objective (Eq. 5.6,
+# {cite:p}`haarnoja2018soft`), and the two agree when the chain reverses the noising process.
+#
+# **Check.** Take the Gaussian target $Q(a)=-(a-\mu)^2/(2s^2)$, whose Boltzmann policy is
+# $\mathcal N(\mu,s^2)$ with $\log\mathcal Z=\tfrac12\log(2\pi s^2)$. On the chains sampled above
+# the cell estimates the joint KL of Eq. 5.18 by Monte Carlo, as the mean of
+# $\log\tilde\pi_{0:N}-\log\vec\pi_0(\mathbf a^0)-\log\vec\pi_{1:N|0}$. It compares the estimate
+# with the right-hand side of Eq. C.11 at one state, $-\mathbb E[Q]-\ell+\log\mathcal Z$
+# (closed-form $\ell$ from the package, $\mathbb E[Q]$ from the marginal's moments), and with
+# the Gaussian marginal KL of Eq. 5.20.
+
+# %%
+mu, s = 0.5, 0.7  # Q(a) = -(a - μ)² / (2 s²): exp Q / Z = N(μ, s²)
+log_z = 0.5 * np.log(2 * np.pi * s**2)
+q_of_action = -((a - mu) ** 2) / (2 * s**2)
+joint_kl_samples = -log_ratio - (q_of_action - log_z)  # log π̃_{0:N} - log π⃗_0(a^0) - log π⃗_{1:N|0}
+expected_q = -((mean - mu) ** 2 + var) / (2 * s**2)
+rhs_c11 = -expected_q - chain.bound[0] + log_z  # Eq. C.11 at one state
+kl_marginal = 0.5 * (var / s**2 + (mean - mu) ** 2 / s**2 - 1 + np.log(s**2 / var))
+print(f"joint KL (Eq. 5.18) Monte Carlo {joint_kl_samples.mean():.4f} ± {stderr(joint_kl_samples):.4f}"
+      f"   −E[Q] − ℓ + log Z = {rhs_c11:.4f}")
+print(f"marginal KL (left side of Eq. 5.20) {kl_marginal:.4f}")
+assert abs(joint_kl_samples.mean() - rhs_c11) < 5 * stderr(joint_kl_samples)  # Eq. C.11
+assert kl_marginal <= rhs_c11  # Eq. 5.20
+
+# %% [markdown]
 # ## 2. Soft policy iteration with the bound
 #
-# Replacing $\mathcal H$ by $\ell$ in the soft Bellman operator (Eq. 5.21) keeps it a
-# $\gamma$-contraction (Prop. 5.4.1), so policy evaluation converges — to a Q that is below the
-# exact soft Q, since $\ell\le\mathcal H$. Improving the policy by decreasing the KL to
-# $\exp(Q/\alpha)/Z$ never lowers Q (Prop. 5.4.2), and alternating both converges
-# (Prop. 5.4.3). On a tabular MDP with exact entropies (SAC's setting) all of this can be
-# computed exactly; the second check below does it with the diffusion chain and ℓ.
+# Section 5.4.2 of the thesis proves, for finite action spaces, that SAC's soft policy
+# iteration {cite:p}`haarnoja2018soft` survives the replacement of the entropy by $\ell$ and
+# of the policy class by a family $\tilde\Pi$ of diffusion policies. Policy evaluation uses the
+# backup
+#
+# (eq-5-21)=
+# $$
+# \mathcal T^{\tilde\pi}Q(\mathbf s_t,\mathbf a^0_t)\triangleq r_t+\gamma\,\mathbb E_{\mathbf s_{t+1}\sim p,\;\mathbf a^0_{t+1}\sim\tilde\pi_0}\big[Q(\mathbf s_{t+1},\mathbf a^0_{t+1})+\ell_{\tilde\pi}(\mathbf a^0_{t+1},\mathbf s_{t+1})\big], \tag{5.21}
+# $$
+#
+# SAC's operator (Eq. 5.5) with $\ell$ where the entropy was.
+#
+# **Proposition 5.4.1 (policy evaluation).** For any $Q^0:\mathcal S\times\mathcal A\to\mathbb R$
+# and $Q^{k+1}=\mathcal T^{\tilde\pi}Q^k$, $\lim_{k\to\infty}Q^k=Q^{\tilde\pi}$ of Eq. 5.17.
+#
+# *Proof.* For a fixed policy, $\ell_{\tilde\pi}(\mathbf s')$ is just a number per state. Fold it
+# into the reward,
+#
+# (eq-C-13)=
+# $$
+# r_{\tilde\pi}(\mathbf s_t,\mathbf a^0_t)\triangleq r_t(\mathbf s_t,\mathbf a^0_t)+\gamma\,\mathbb E_{\mathbf s_{t+1}\sim p}\big[\ell_{\tilde\pi}(\mathbf a^0_{t+1},\mathbf s_{t+1})\big], \tag{C.13}
+# $$
+#
+# (the thesis's Eq. C.13 adds the log ratio without the discount and the next state; the
+# bound that Eq. 5.21 adds belongs to the next state), and Eq. 5.21 becomes the ordinary
+# policy-evaluation update
+#
+# (eq-C-14)=
+# $$
+# Q(\mathbf s_t,\mathbf a^0_t)\leftarrow r_{\tilde\pi}(\mathbf s_t,\mathbf a^0_t)+\gamma\,\mathbb E_{\mathbf s_{t+1}\sim p,\;\mathbf a^0_{t+1}\sim\tilde\pi_0}\big[Q(\mathbf s_{t+1},\mathbf a^0_{t+1})\big]. \tag{C.14}
+# $$
+#
+# From here the standard argument {cite:p}`sutton2018reinforcement` applies. For two functions,
+# $|\mathcal T^{\tilde\pi}Q_1-\mathcal T^{\tilde\pi}Q_2|(\mathbf s,\mathbf a)=\gamma\,|\mathbb E[Q_1-Q_2]|\le\gamma\|Q_1-Q_2\|_\infty$,
+# because the rewards and the bound cancel. So $\mathcal T^{\tilde\pi}$ is a $\gamma$-contraction in
+# the sup-norm, has exactly one fixed point, and $\|Q^k-Q^\star\|_\infty\le\gamma^k\|Q^0-Q^\star\|_\infty$
+# (Banach). With finitely many actions the bound is finite, so the fixed point exists. Unrolling
+# $Q^\star=r_{\tilde\pi}+\gamma P^{\tilde\pi}Q^\star$ $k$ times gives the first $k$ terms of Eq. 5.17
+# plus $\gamma^k(P^{\tilde\pi})^kQ^\star\to0$, so $Q^\star=Q^{\tilde\pi}$. $\square$
+#
+# **Policy improvement.** The new policy solves the inference problem of Eq. 5.18 against the
+# old Q-function,
+#
+# (eq-5-22)=
+# $$
+# \tilde\pi^{\text{new}}=\arg\min_{\tilde\pi\in\tilde\Pi}D_{\mathrm{KL}}\big(\tilde\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\,\big\|\,\vec\pi^{\text{old}}_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\big)\quad\text{for all }\mathbf s, \tag{5.22}
+# $$
+#
+# where $\vec\pi^{\text{old}}_{0:N}$ is the noising chain of Eq. 5.13 started at
+#
+# (eq-5-23)=
+# $$
+# \vec\pi^{\text{old}}_0(\mathbf a^0\mid\mathbf s)=\frac{\exp Q^{\tilde\pi_{\text{old}}}(\mathbf s,\mathbf a^0)}{\mathcal Z^{\tilde\pi_{\text{old}}}(\mathbf s)} \tag{5.23}
+# $$
+#
+# (the thesis writes this target chain with a tilde; it is the noising chain).
+#
+# **Proposition 5.4.2 (policy improvement).** With $\tilde\pi_{\text{old}}\in\tilde\Pi$ and
+# $\tilde\pi_{\text{new}}$ from Eq. 5.22, $Q^{\tilde\pi_{\text{new}}}(\mathbf s,\mathbf a)\ge Q^{\tilde\pi_{\text{old}}}(\mathbf s,\mathbf a)$
+# for all $(\mathbf s,\mathbf a)$.
+#
+# *Proof.* Write $Q^{\text{old}},\ell_{\text{old}},\ell_{\text{new}}$ for short. If $\tilde\Pi$
+# contained every chain, the minimiser would be the target itself, the Boltzmann policy
+# followed by the noising conditional,
+#
+# (eq-C-15)=
+# $$
+# \tilde\pi^{\text{new}}_{0:N}(\mathbf a^{0:N}\mid\mathbf s)=\frac{\exp Q^{\text{old}}(\mathbf s,\mathbf a^0)}{\mathcal Z^{\text{old}}(\mathbf s)}\,\vec\pi_{1:N|0}(\mathbf a^{1:N}\mid\mathbf a^0,\mathbf s), \tag{C.15}
+# $$
+#
+# with a KL of zero. The argument below needs less: the old policy is itself a member of
+# $\tilde\Pi$, so the minimiser does at least as well as it,
+#
+# (eq-C-16)=
+# $$
+# D_{\mathrm{KL}}\big(\tilde\pi^{\text{new}}_{0:N}\,\big\|\,\vec\pi^{\text{old}}_{0:N}\big)\le D_{\mathrm{KL}}\big(\tilde\pi^{\text{old}}_{0:N}\,\big\|\,\vec\pi^{\text{old}}_{0:N}\big)\quad\text{at every }\mathbf s. \tag{C.16}
+# $$
+#
+# Eqs. C.10–C.11 at a single state, with $Q^{\text{old}}$ in the target, turn each side into an
+# expected Q-value plus a bound:
+# $-D_{\mathrm{KL}}(\tilde\pi_{0:N}\|\vec\pi^{\text{old}}_{0:N})+\log\mathcal Z^{\text{old}}=\mathbb E_{\tilde\pi_0}[Q^{\text{old}}(\mathbf s,\mathbf a^0)]+\ell_{\tilde\pi}(\mathbf s)$.
+# The partition function is common to both sides (Eqs. C.17–C.19 do this expansion term by
+# term), so
+#
+# (eq-C-20)=
+# $$
+# \mathbb E_{\tilde\pi^{\text{new}}_0}\big[Q^{\text{old}}(\mathbf s,\mathbf a^0)\big]+\ell_{\text{new}}(\mathbf s)\;\ge\;\mathbb E_{\tilde\pi^{\text{old}}_0}\big[Q^{\text{old}}(\mathbf s,\mathbf a^0)\big]+\ell_{\text{old}}(\mathbf s)\quad\text{for every }\mathbf s. \tag{C.20}
+# $$
+#
+# (The thesis names the two log-ratio terms $d^{(i+1)}$ and $d^{(i)}$, Eqs. C.21–C.22; they are
+# $\ell_{\text{new}}$ and $\ell_{\text{old}}$.) The right-hand side is the old policy's soft value
+# at $\mathbf s$. Start from the old policy's Bellman equation and use Eq. C.20 at the next state:
+#
+# (eq-C-23)=
+# $$
+# Q^{\text{old}}(\mathbf s_0,\mathbf a_0)=r_0+\gamma\,\mathbb E_{\mathbf s_1}\Big[\mathbb E_{\tilde\pi^{\text{old}}_0}\big[Q^{\text{old}}(\mathbf s_1,\mathbf a_1)\big]+\ell_{\text{old}}(\mathbf s_1)\Big] \tag{C.23}
+# $$
+#
+# (eq-C-24)=
+# $$
+# \le r_0+\gamma\,\mathbb E_{\mathbf s_1}\Big[\mathbb E_{\tilde\pi^{\text{new}}_0}\big[Q^{\text{old}}(\mathbf s_1,\mathbf a_1)\big]+\ell_{\text{new}}(\mathbf s_1)\Big]. \tag{C.24}
+# $$
+#
+# Expand the $Q^{\text{old}}(\mathbf s_1,\mathbf a_1)$ inside, now with $\mathbf a_1$ drawn from the
+# new policy, by the old Bellman equation once more:
+#
+# (eq-C-25)=
+# $$
+# =r_0+\mathbb E\Big[\gamma\big(r_1+\ell_{\text{new}}(\mathbf s_1)\big)+\gamma^2\Big(\mathbb E_{\tilde\pi^{\text{old}}_0}\big[Q^{\text{old}}(\mathbf s_2,\mathbf a_2)\big]+\ell_{\text{old}}(\mathbf s_2)\Big)\Big], \tag{C.25}
+# $$
+#
+# apply Eq. C.20 at $\mathbf s_2$ (Eq. C.26), and repeat (Eq. C.27). After $k$ rounds the
+# first $k$ steps follow the new policy and the rest is multiplied by $\gamma^{k}$; in the limit
+#
+# (eq-C-28)=
+# $$
+# Q^{\text{old}}(\mathbf s_0,\mathbf a_0)\le r_0+\mathbb E\Big[\sum_{t=1}^{\infty}\gamma^t\big(r_t+\ell_{\text{new}}(\mathbf s_t)\big)\Big]=Q^{\text{new}}(\mathbf s_0,\mathbf a_0), \tag{C.28}
+# $$
+#
+# which is Eq. 5.17 for the new policy. $\square$
+#
+# **Proposition 5.4.3 (policy iteration).** Alternating evaluation and improvement from any
+# $\tilde\pi^0\in\tilde\Pi$ converges to a $\tilde\pi^*$ with $Q^{\tilde\pi^*}(\mathbf s,\mathbf a)\ge Q^{\tilde\pi}(\mathbf s,\mathbf a)$
+# for every $\tilde\pi\in\tilde\Pi$ and every $(\mathbf s,\mathbf a)$.
+#
+# *Proof.* By Proposition 5.4.2 the sequence $Q^{\tilde\pi^i}$ never decreases, and it is
+# bounded because rewards and bounds are (finite action space), so it converges. At the limit
+# $\tilde\pi^*$ an improvement step changes nothing, so $\tilde\pi^*$ minimises Eq. 5.22 against
+# its own Q-function. By the step from Eq. C.16 to C.20, for every $\tilde\pi\in\tilde\Pi$ and
+# every state,
+# $\mathbb E_{\tilde\pi^*_0}[Q^*]+\ell_{\tilde\pi^*}\ge\mathbb E_{\tilde\pi_0}[Q^*]+\ell_{\tilde\pi}$
+# with $Q^*=Q^{\tilde\pi^*}$. Hence $\mathcal T^{\tilde\pi}Q^*\le\mathcal T^{\tilde\pi^*}Q^*=Q^*$.
+# $\mathcal T^{\tilde\pi}$ is monotone, so $(\mathcal T^{\tilde\pi})^kQ^*\le Q^*$ for every $k$, and the
+# left side tends to $Q^{\tilde\pi}$ by Proposition 5.4.1. So $Q^{\tilde\pi}\le Q^*$. $\square$
+# (The thesis's proof, in Appendix C.2, states this last step in one sentence.)
+#
+# ### A finite check: a one-step chain on finite sets
+#
+# The propositions assume finite action spaces, and there the whole argument can be run
+# exactly. Take a chain with $N=1$ on finite sets: the noise $\mathbf a^1=z\in\{1,\dots,K\}$
+# and the action $\mathbf a^0=a\in\{1,\dots,|\mathcal A|\}$. The three ingredients of DIME
+# map one to one:
+#
+# | diffusion policy | finite version |
+# |---|---|
+# | prior $\tilde\pi_N=\mathcal N(0,\sigma_0^2I)$, fixed | $\tilde\pi_1(z)=1/K$, fixed |
+# | denoising kernels $\tilde\pi_{n-1\mid n}$, learned through $f_\theta$ | a table $\tilde\pi_{0\mid1}(a\mid z,\mathbf s)$, learned |
+# | noising (OU) kernels $\vec\pi_{n\mid n-1}$, fixed | a fixed stochastic matrix $\vec\pi_{1\mid0}(z\mid a)$ |
+#
+# The policy is the marginal $\tilde\pi_0(a\mid\mathbf s)=\sum_z\tilde\pi_1(z)\tilde\pi_{0|1}(a\mid z,\mathbf s)$,
+# and Eq. 5.15 becomes a finite sum, $\ell(\mathbf s)=\sum_{z,a}\tilde\pi_1(z)\tilde\pi_{0|1}(a\mid z,\mathbf s)\log\frac{\vec\pi_{1|0}(z\mid a)}{\tilde\pi_1(z)\tilde\pi_{0|1}(a\mid z,\mathbf s)}$.
+# The family is restricted, since the prior is fixed, just as in DIME. The improvement
+# step of Eq. 5.22 still has a closed form here. With $\alpha$ written out again, the target
+# joint is $\exp(Q(\mathbf s,a)/\alpha)\,\vec\pi_{1|0}(z\mid a)/\mathcal Z$, and for each $z$
+# minimising the KL over the row $\tilde\pi_{0|1}(\cdot\mid z,\mathbf s)$ gives
+#
+# $$
+# \tilde\pi^{\text{new}}_{0|1}(a\mid z,\mathbf s)\propto\exp\big(Q^{\text{old}}(\mathbf s,a)/\alpha\big)\,\vec\pi_{1|0}(z\mid a),
+# $$
+#
+# the target's conditional of the action given the noise. Putting it back, the best value the
+# family can reach at a state is
+# $V(\mathbf s)=\alpha\sum_z\tilde\pi_1(z)\log\big(\sum_a e^{Q(\mathbf s,a)/\alpha}\vec\pi_{1|0}(z\mid a)/\tilde\pi_1(z)\big)$,
+# and iterating $Q\leftarrow R+\gamma PV$ (a second contraction) gives the family's optimum
+# directly, without policy iteration. The cells below check, on a random 6-state MDP with
+# $|\mathcal A|=3$, $K=4$, $\gamma=0.9$ and $\alpha=0.5$:
+#
+# 1. Eq. C.2 in this setting: $\ell\le\mathcal H(\tilde\pi_0)$ at every state, and the gap is the
+#    expected KL of the two conditionals of $z$ given $a$;
+# 2. Prop. 5.4.1: iterating the package's `soft_bellman_operator` with the bonus $\alpha\ell$ from a
+#    random $Q^0$ approaches $Q^{\tilde\pi}$, computed in the cell as the series of Eq. 5.17, with
+#    error at most $\gamma^k$ times the initial error;
+# 3. Prop. 5.4.2: one improvement step satisfies Eq. C.20 at every state, raises Q
+#    everywhere, and beats 300 random members of the family on Eq. C.20's left side;
+# 4. Prop. 5.4.3: policy iteration is monotone, converges, ends at the family's optimum found
+#    by the value iteration above, and its Q dominates that of 300 random members.
+
+# %%
+from vslbook.bounds.foundations import random_mdp
+
+n_s, n_a, n_z = 6, 3, 4  # states, actions a^0, noise values a^1
+gamma, alpha = 0.9, 0.5
+P, R = random_mdp(n_s, n_a, seed=3)  # P[s, a, s'], R[s, a]
+rng = np.random.default_rng(1)
+prior = np.full(n_z, 1 / n_z)  # π̃_1(z): fixed, the role of N(0, σ0²)
+noising = rng.dirichlet(np.ones(n_z), size=n_a)  # π⃗_{1|0}(z | a), row a: fixed, the OU step
+
+
+def marginal(kernel):  # kernel[s, z, a] = π̃_{0|1}(a | z, s);  returns π̃_0(a | s)
+    return np.einsum("z,sza->sa", prior, kernel)
+
+
+def bound(kernel):  # ℓ(s), Eq. 5.15 with N = 1, by enumeration
+    log_ratio = np.log(noising.T)[None] - np.log(prior)[None, :, None] - np.log(kernel)
+    return np.einsum("z,sza,sza->s", prior, kernel, log_ratio)
+
+
+def evaluate(kernel):  # Eq. 5.17 by one linear solve: Q = R + γ P W, W = E_π̃0[Q] + α ℓ
+    pi = marginal(kernel)
+    p_pi = np.einsum("sa,sat->st", pi, P)
+    w = np.linalg.solve(np.eye(n_s) - gamma * p_pi, (pi * R).sum(1) + alpha * bound(kernel))
+    return R + gamma * P @ w
+
+
+def soft_value(kernel, q):  # E_π̃0[Q(s, a)] + α ℓ(s): both sides of Eq. C.20
+    return (marginal(kernel) * q).sum(1) + alpha * bound(kernel)
+
+
+def improve(q):  # Eq. 5.22 in closed form: π̃(a | z, s) ∝ exp(Q(s, a) / α) π⃗(z | a)
+    logits = q[:, None, :] / alpha + np.log(noising.T)[None]
+    weights = np.exp(logits - logits.max(-1, keepdims=True))
+    return weights / weights.sum(-1, keepdims=True)
+
+
+def random_kernel():
+    return rng.dirichlet(np.ones(n_a), size=(n_s, n_z))
+
+
+kernel = random_kernel()
+pi0, ell = marginal(kernel), bound(kernel)
+entropy = -(pi0 * np.log(pi0)).sum(1)
+posterior = prior[None, :, None] * kernel / pi0[:, None, :]  # π̃_{1|0}(z | a, s)
+gap = np.einsum("sa,sza->s", pi0, posterior * np.log(posterior / noising.T[None]))
+print("H − ℓ per state:  ", np.round(entropy - ell, 4))
+print("E KL(π̃_1|0 ‖ π⃗_1|0):", np.round(gap, 4))
+assert np.all(ell <= entropy) and np.allclose(entropy - ell, gap, atol=1e-12)  # Eq. C.2
+
+# %% [markdown]
+# **(a) Proposition 5.4.1.** The package's operator against the series of Eq. 5.17, summed in
+# the cell: $Q^{\tilde\pi}=R+\gamma P\sum_{j\ge0}\gamma^j(P^{\tilde\pi})^j\big(r^{\tilde\pi}+\alpha\ell\big)$,
+# with $r^{\tilde\pi}(\mathbf s)=\sum_a\tilde\pi_0(a\mid\mathbf s)R(\mathbf s,a)$.
+
+# %%
+p_pi = np.einsum("sa,sat->st", pi0, P)
+series, term = np.zeros(n_s), (pi0 * R).sum(1) + alpha * ell
+for _ in range(400):  # γ^400 ≈ 5e-19
+    series += term
+    term = gamma * p_pi @ term
+q_series = R + gamma * P @ series  # Eq. 5.17
+q = rng.normal(scale=10.0, size=(n_s, n_a))  # any Q^0
+errors = [np.abs(q - q_series).max()]
+for _ in range(200):
+    q = D.soft_bellman_operator(q, P, R, pi0, gamma, alpha, bonus=alpha * ell)  # Eq. 5.21
+    errors.append(np.abs(q - q_series).max())
+errors = np.array(errors)
+rates = errors[1:] / errors[:-1]
+print(f"‖Q^k − Q^π̃‖∞ for k = 0, 1, 2, 50, 200: {errors[[0, 1, 2, 50, 200]]}")
+print(f"largest one-step error ratio {rates[:100].max():.4f} (γ = {gamma})")
+assert np.all(errors <= gamma ** np.arange(errors.size) * errors[0] + 1e-12)
+assert errors[-1] < 1e-8
+
+# %% [markdown]
+# **(b) Proposition 5.4.2.** One improvement step from the random policy above: Eq. C.20 at
+# every state, then the new Q-function against the old one everywhere. Eq. C.20's left
+# side is also what Eq. 5.22 maximises over the family, so the step must also beat random
+# members of the family there.
+
+# %%
+q_old = evaluate(kernel)
+new_kernel = improve(q_old)
+q_new = evaluate(new_kernel)
+lhs, rhs = soft_value(new_kernel, q_old), soft_value(kernel, q_old)
+best_random = np.max([soft_value(random_kernel(), q_old) for _ in range(300)], axis=0)
+print("Eq. C.20, new − old per state:", np.round(lhs - rhs, 3))
+print(f"Q_new − Q_old: min {(q_new - q_old).min():.4f}, max {(q_new - q_old).max():.4f}")
+assert np.all(lhs >= rhs - 1e-12)  # Eq. C.20
+assert np.all(q_new >= q_old - 1e-12)  # Prop. 5.4.2
+assert np.all(lhs >= best_random - 1e-12)  # the step solves Eq. 5.22 within the family
+
+# %% [markdown]
+# **(c) Proposition 5.4.3.** Thirty rounds of evaluation and improvement from a fresh random
+# policy, against the family's optimum from the value iteration written in the cell.
+
+# %%
+kern, q_iterates = random_kernel(), []
+for _ in range(30):
+    q_iterates.append(evaluate(kern))
+    kern = improve(q_iterates[-1])
+q_iterates = np.array(q_iterates)
+q_star = np.zeros((n_s, n_a))
+for _ in range(600):  # Q ← R + γ P V, V(s) = α Σ_z π̃_1(z) log(Σ_a e^{Q/α} π⃗(z|a) / π̃_1(z))
+    inner = np.einsum("sa,az->sz", np.exp(q_star / alpha), noising) / prior
+    q_star = R + gamma * P @ (alpha * np.log(inner) @ prior)
+steps = np.abs(np.diff(q_iterates, axis=0)).max((1, 2))
+print("‖Q^{i+1} − Q^i‖∞, i = 0..5:", np.round(steps[:6], 8))
+print(f"‖Q^30 − Q*‖∞ = {np.abs(q_iterates[-1] - q_star).max():.2e}")
+assert np.all(np.diff(q_iterates, axis=0) >= -1e-12)  # monotone (Prop. 5.4.2)
+assert np.abs(q_iterates[-1] - q_star).max() < 1e-8  # converges to the family's optimum
+assert all(np.all(q_star >= evaluate(random_kernel()) - 1e-12) for _ in range(300))
+
+# %% [markdown]
+# ### The library's checks
+#
+# The library checks the same three statements in two further settings. The first is SAC's
+# setting: random tabular MDPs with a discrete policy and its exact entropy, where any
+# per-state bonus below the entropy (such as $\ell$) keeps the operator a $\gamma$-contraction
+# and lowers its fixed point, since $\ell\le\mathcal H$. The second runs them with the
+# diffusion chains of Section 1 and $\ell$ itself.
 
 # %%
 contraction = show(D.check_soft_bellman_contraction(seed=0))
@@ -148,12 +786,13 @@ plt.show()
 # problem where both sides can be computed: a one-dimensional linear-quadratic task
 # ($s'=As+Ba+w$, quadratic reward) and the linear-Gaussian chains of Section 1 with the score
 # $f_k(x,s)=\text{slope}\cdot x+c_k+g_k\,s$ at step $k$. Then every Q-function is quadratic,
-# every chain is Gaussian, and the improvement step, which minimises the joint KL of Eq. 5.22
-# between the policy's chain and the noising chain started at $\exp(Q/\alpha)/Z$, has a
-# closed-form objective. The check compares the closed-form Q with repeated backups of
-# Eq. 5.21 (Prop. 5.4.1), Q before and after every improvement (Prop. 5.4.2), and the end
-# point of policy iteration with the best member of the family, found separately by
-# maximising $\bar J$ (Eq. 5.16) with a general-purpose optimiser (Prop. 5.4.3).
+# every chain is Gaussian, and the improvement step, which minimises the joint KL of
+# [Eq. 5.22](#eq-5-22) between the policy's chain and the noising chain started at
+# $\exp(Q/\alpha)/Z$, has a closed-form objective. The check compares the closed-form Q with
+# repeated backups of [Eq. 5.21](#eq-5-21) (Prop. 5.4.1), Q before and after every
+# improvement (Prop. 5.4.2), and the end point of policy iteration with the best member of the
+# family, found separately by maximising $\bar J$ ([Eq. 5.16](#eq-5-16)) with a general-purpose
+# optimiser (Prop. 5.4.3).
 #
 # What it does not show: the end point is the best policy of the family *for the bound*
 # $\bar J$, not for the true objective with the exact entropy. ℓ stays below H there, and
@@ -185,9 +824,182 @@ fig.tight_layout()
 plt.show()
 
 # %% [markdown]
+# ## 2b. The practical losses
+#
+# DIME replaces the exact steps of Section 2 by stochastic gradient steps on a critic $Q_\phi$
+# and a diffusion policy $\pi^\theta$ (Algorithm 4), with states and actions from a replay
+# buffer and $\alpha$ back outside the reward.
+#
+# **Critic.** Policy evaluation becomes a regression on the Bellman residual,
+#
+# (eq-5-24)=
+# $$
+# J_Q(\phi)=\tfrac12\,\mathbb E\big[\big(Q_\phi(\mathbf s_t,\mathbf a^0_t)-Q_{\text{target}}(\mathbf s_t,\mathbf a^0_t)\big)^2\big], \tag{5.24}
+# $$
+#
+# whose target is [Eq. 5.21](#eq-5-21) with one sample: run the chain at the next state,
+# $\mathbf a'\sim\pi^\theta(\cdot\mid\mathbf s_{t+1})$, and use its single-chain estimate
+# $\hat\ell=-(\text{running}+\text{terminal cost})$ of Section 1.2 for the bound,
+#
+# $$
+# Q_{\text{target}}=r_t+\gamma\,(1-d_t)\Big(\bar Q(\mathbf s_{t+1},\mathbf a')+\alpha\,\hat\ell(\mathbf a',\mathbf s_{t+1})\Big),
+# $$
+#
+# with $d_t=1$ on a terminal transition and no gradient through the target. Because $\hat\ell$
+# is unbiased for $\ell$ and enters linearly, the target is unbiased for Eq. 5.21 at the
+# sampled next state. DIME follows CrossQ {cite:p}`bhatt2024crossq`: no target network, and
+# $\bar Q=\tfrac12(Q_1+Q_2)$ the mean of two critics (Appendix C.4). Each critic gets its own
+# copy of Eq. 5.24 and the two losses are added. The distributional critic of
+# {cite:p}`bellemare2017distributional` moves every atom of the next-state distribution to
+# $r+\gamma(1-d)(z_i+\alpha\hat\ell)$ instead and fits the projected distribution by
+# cross-entropy.
+#
+# **Actor.** Policy improvement becomes the inference problem of [Eq. 5.22](#eq-5-22) with the
+# learned critic,
+#
+# (eq-5-25)=
+# $$
+# \mathcal L(\theta)=D_{\mathrm{KL}}\big(\pi^\theta_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\,\big\|\,\vec\pi_{0:N}(\mathbf a^{0:N}\mid\mathbf s)\big), \tag{5.25}
+# $$
+#
+# where the noising chain starts at the critic's Boltzmann policy,
+#
+# (eq-5-26)=
+# $$
+# \vec\pi_0(\mathbf a^0\mid\mathbf s)=\frac{\exp Q_\phi(\mathbf s,\mathbf a^0)}{\mathcal Z_\phi(\mathbf s)} \tag{5.26}
+# $$
+#
+# (the thesis writes the second argument of Eq. 5.25 with a tilde; it is this noising chain).
+# Write out both joints with Eqs. 5.13–5.14:
+# $\log\pi^\theta_{0:N}=\log\pi^\theta_N(\mathbf a^N)+\sum_n\log\pi^\theta_{n-1|n}$ and
+# $\log\vec\pi_{0:N}=Q_\phi(\mathbf s,\mathbf a^0)-\log\mathcal Z_\phi(\mathbf s)+\sum_n\log\vec\pi_{n|n-1}$.
+# Their difference under $\pi^\theta$ is
+#
+# (eq-5-27)=
+# $$
+# \mathcal L(\theta)=\mathbb E_{\pi^\theta}\Big[\log\pi^\theta_N(\mathbf a^N\mid\mathbf s)-Q_\phi(\mathbf s,\mathbf a^0)+\sum_{n=1}^N\log\frac{\pi^\theta_{n-1|n}(\mathbf a^{n-1}\mid\mathbf a^n,\mathbf s)}{\vec\pi_{n|n-1}(\mathbf a^n\mid\mathbf a^{n-1},\mathbf s)}\Big]+\log\mathcal Z_\phi(\mathbf s). \tag{5.27}
+# $$
+#
+# $\log\mathcal Z_\phi$ does not depend on $\theta$ and drops out of the gradient. The first and
+# last terms in the bracket are the chain's terminal and running costs, i.e. $-\hat\ell$, so the
+# loss is $\mathbb E[-\hat\ell-Q_\phi]$, and no sample of the Boltzmann policy is needed. With
+# the temperature written out ($\exp(Q_\phi/\alpha)$ in Eq. 5.26, the KL multiplied by $\alpha$)
+# the library minimises the batch mean of $\alpha(\text{running}+\text{terminal cost})-\bar Q(\mathbf s,\mathbf a^0)$.
+# Every step of the chain is a reparameterised Gaussian,
+# $\mathbf a^{n-1}=\text{mean}_\theta(\mathbf a^n)+\text{std}\cdot\varepsilon_n$, so the gradient flows
+# through the whole chain {cite:p}`kingma2013auto`.
+#
+# **Temperature.** As in SAC {cite:p}`haarnoja2018sac`, $\alpha$ is tuned by minimising
+#
+# (eq-5-28)=
+# $$
+# J(\alpha)=\alpha\big(\mathcal H_{\text{target}}-\ell^\theta_{\mathcal H}\big), \tag{5.28}
+# $$
+#
+# where $\ell^\theta_{\mathcal H}$ is the batch mean of the chain's log ratio of denoising to
+# noising kernels (the running cost, tanh correction included), held fixed while $\alpha$
+# moves. It is minus the entropy bound without the prior's constant term: the larger it is,
+# the less entropy the bound certifies. The gradient is
+# $\partial J/\partial\alpha=\mathcal H_{\text{target}}-\ell^\theta_{\mathcal H}$, so a descent
+# step $\alpha\leftarrow\alpha-\lambda(\mathcal H_{\text{target}}-\ell^\theta_{\mathcal H})$
+# *raises* $\alpha$ when $\ell^\theta_{\mathcal H}>\mathcal H_{\text{target}}$ (too little entropy)
+# and lowers it in the opposite case. A larger $\alpha$ weighs the cost more in the actor loss,
+# the actor then lowers the running cost, and $\ell^\theta_{\mathcal H}$ moves back towards the
+# target. The only rest point is $\ell^\theta_{\mathcal H}=\mathcal H_{\text{target}}$. The library
+# descends in $\log\alpha$, with gradient $\alpha(\mathcal H_{\text{target}}-\ell^\theta_{\mathcal H})$:
+# the same sign, and $\alpha$ stays positive. Table C.2's $\mathcal H_{\text{target}}=4\dim\mathcal A$
+# is a target for this running cost.
+#
+# **Check.** A tiny DIME agent (3-dimensional states, 2-dimensional actions, 2 diffusion
+# steps, scalar critics) and a batch of four transitions, one of them terminal. The cell
+# runs the package's three update functions. It recomputes each loss with the formula
+# written above from the same network outputs: the chain is re-run with the same seed, and
+# the critics are evaluated on copies taken before the update. Then it checks that the
+# temperature step moves $\log\alpha$ in the direction the sign argument predicts.
+
+# %%
+import copy
+
+from vslbook.srl.dime_updates import actor_update, alpha_update, critic_update, make_agent
+from vslbook.srl.replay import Batch
+
+torch.manual_seed(0)
+cfg = DIMEConfig(critic="scalar", actor_hidden=16, actor_layers=2, critic_hidden=16,
+                 critic_layers=2, n_diffusion_steps=2, init_log_alpha=-1.25, device="cpu")
+agent = make_agent(3, 2, cfg)
+g = torch.Generator().manual_seed(1)
+batch = Batch(obs=torch.randn(4, 3, generator=g), action=2 * torch.rand(4, 2, generator=g) - 1,
+              reward=torch.tensor([1.0, -0.5, 2.0, 0.3]), next_obs=torch.randn(4, 3, generator=g),
+              terminated=torch.tensor([0.0, 0.0, 1.0, 0.0]))
+alpha_now = float(np.exp(cfg.init_log_alpha))
+
+# critic, Eq. 5.24 with the target of Eq. 5.21
+policy, critic = copy.deepcopy(agent.policy), copy.deepcopy(agent.critic)
+torch.manual_seed(7)
+critic_loss = critic_update(agent, batch).loss.item()  # package
+torch.manual_seed(7)
+with torch.no_grad():
+    nxt = policy.sample(batch.next_obs)  # the same a' ~ π(·|s')
+    out = critic(torch.cat([batch.obs, batch.next_obs]), torch.cat([batch.action, nxt.action]))
+q_now, q_next = out[:, :4].numpy(), out[:, 4:].numpy()  # CrossQ: one joint pass
+ell_hat = -(nxt.running_cost + nxt.terminal_cost).numpy()
+r, done = batch.reward.numpy(), batch.terminated.numpy()
+y = r + cfg.gamma * (1 - done) * (q_next.mean(0) + alpha_now * ell_hat)
+critic_by_hand = sum(0.5 * np.mean((q_now[k] - y) ** 2) for k in range(2))
+
+# actor, Eq. 5.27 with α written out
+policy, critic = copy.deepcopy(agent.policy), copy.deepcopy(agent.critic)
+torch.manual_seed(8)
+stats = actor_update(agent, batch.obs)  # package
+torch.manual_seed(8)
+with torch.no_grad():
+    smp = policy.sample(batch.obs)
+    q_actor = critic.eval()(batch.obs, smp.action).numpy()
+cost = (smp.running_cost + smp.terminal_cost).numpy()
+actor_by_hand = np.mean(alpha_now * cost - q_actor.mean(0))
+
+# temperature, Eq. 5.28 on the actor's running cost
+running = stats.running_cost
+log_alpha_before = agent.log_alpha.item()
+alpha_loss = alpha_update(agent, running).item()  # package
+alpha_by_hand = alpha_now * (agent.h_target - running.mean().item())
+step = agent.log_alpha.item() - log_alpha_before
+print(f"target y = {np.round(y, 4)}  (row 3 is terminal: y = r)")
+print(f"critic loss: package {critic_loss:.6f}   by hand {critic_by_hand:.6f}")
+print(f"actor loss:  package {stats.loss.item():.6f}   by hand {actor_by_hand:.6f}")
+print(f"α loss:      package {alpha_loss:.6f}   by hand {alpha_by_hand:.6f}")
+print(f"running cost {running.mean().item():.3f} vs H_target {agent.h_target:.1f}: "
+      f"log α moved by {step:+.2e}")
+assert abs(critic_loss - critic_by_hand) < 1e-5 * max(1.0, critic_by_hand)
+assert abs(stats.loss.item() - actor_by_hand) < 1e-5 * max(1.0, abs(actor_by_hand))
+assert abs(alpha_loss - alpha_by_hand) < 1e-5 * max(1.0, abs(alpha_by_hand))
+assert np.sign(step) == np.sign(running.mean().item() - agent.h_target)  # α rises iff cost > target
+
+# %% [markdown]
+# **Why the sign drives the bound to the target.** A toy with a closed-form answer makes the
+# feedback loop visible. Take one action dimension, $Q(a)=-ka^2/2$, and let the actor answer
+# every $\alpha$ with the best Gaussian, $\mathcal N(0,\alpha/k)$, the exact minimiser of
+# $\alpha\,\mathrm{KL}(\pi\,\|\,e^{Q/\alpha}/\mathcal Z)$. Its cost, the negative entropy
+# $c(\alpha)=-\tfrac12\log(2\pi e\,\alpha/k)$, falls as $\alpha$ grows. Gradient descent on
+# Eq. 5.28 in $\alpha$, as in Algorithm 4, must then come to rest where
+# $c(\alpha)=\mathcal H_{\text{target}}$, at $\alpha^\ast=k\,e^{-2\mathcal H_{\text{target}}}/(2\pi e)$,
+# whether it starts below or above it.
+
+# %%
+k_curv, h_target = 2.0, -1.0  # curvature of Q; a target cost of -1 nat, i.e. entropy 1 nat
+alpha_star = k_curv * np.exp(-2 * h_target) / (2 * np.pi * np.e)
+for start in (0.01, 20.0):
+    a_t = start
+    for _ in range(400):
+        cost_t = -0.5 * np.log(2 * np.pi * np.e * a_t / k_curv)  # the actor's answer to α
+        a_t -= 0.2 * (h_target - cost_t)  # ∂J/∂α = H_target − cost (Eq. 5.28)
+    print(f"start α = {start:g}: α after 400 steps {a_t:.6f}, α* = {alpha_star:.6f}")
+    assert abs(a_t - alpha_star) < 1e-6
+
+# %% [markdown]
 # ## 3. Fig. 5.1 — the effect of α
 #
-# With a single state, DIME's actor loss (Eq. 5.27) is $\mathbb E[-Q(a)+\alpha\,(\text{running}+\text{terminal cost})]$,
+# With a single state, DIME's actor loss ([Eq. 5.27](#eq-5-27)) is $\mathbb E[-Q(a)+\alpha\,(\text{running}+\text{terminal cost})]$,
 # an upper bound on $\alpha\,\mathrm{KL}(\pi\,\|\,e^{Q/\alpha}/Z)$ up to a constant. We fit the
 # library's diffusion policy to a double-well $Q$ for three temperatures and draw the chains
 # from the prior to the action, next to the target they approximate.
@@ -288,7 +1100,7 @@ display(side.round(1))
 # | diffusion steps | Fig. 5.2c–d (humanoid-run, 10) | `n_diffusion_steps=2` vs the config's 4 |
 # | fixed α | Fig. 5.4a–b (dog-run, 10) | `fixed_alpha=0.1` vs autotuned α |
 # | Gaussian policy | Fig. 5.4c–d (humanoid-run, dog-run, 10) | `dime-gaussian` |
-# | no distributional Q | Figs. 5.5c–d / 5.6 (Ant, Humanoid, dogs, 10) | `critic="scalar"` (Eq. 5.24) |
+# | no distributional Q | Figs. 5.5c–d / 5.6 (Ant, Humanoid, dogs, 10) | `critic="scalar"` ([Eq. 5.24](#eq-5-24)) |
 # | general bridges | Fig. 5.8a–b (humanoid-run, 10) | `general_bridges=True` |
 # | fixed β | Fig. C.2 (dog-run, 10; the thesis plots the learned β) | `learn_beta=False` |
 # | CrossQ | the baseline of Figs. 5.2–5.3 | `crossq` (Table C.3) |
