@@ -62,6 +62,41 @@
 # notebooks is computed by the code in this repository when the notebook runs.
 
 # %% [markdown]
+# ## Derivations and where they are checked
+#
+# Every result the thesis derives is derived again, step by step, in its chapter's
+# notebook, numbered like the thesis (the equation links below jump to it). Each step is
+# algebra or a numerical check placed right after it; a failing check stops the notebook,
+# and so the book. The last column names the test in `tests/` that checks the same formula
+# against an independent computation (— where only the notebook checks it).
+#
+# | equations | notebook section | check in the notebook | test |
+# |---|---|---|---|
+# | [2.29](#eq-2-29)–[2.33](#eq-2-33) ERL gradient, baseline | 2 §1 | score-function estimate of a Gaussian's gradient on a quadratic return against the exact gradient; the baseline lowers every standard error | — |
+# | [2.39](#eq-2-39)–[2.42](#eq-2-42) soft Bellman, Boltzmann policy | 2 §2 | fixed-point residual of soft value iteration; brute force over the action simplex against $V^*=\alpha\log Z$; $V^{\pi'}-V^*$ identity | `test_bounds_foundations.py::test_soft_value_iteration_limits` |
+# | [2.44](#eq-2-44) self-paced objective | 2 §3 | objective $=\beta\log Z_\beta-\beta\,\mathrm{KL}(\pi\|\pi^*)$ for random curricula; the closed-form optimum | `test_bounds_foundations.py::test_self_paced_optimum_limits` |
+# | [2.47](#eq-2-47)–[2.49](#eq-2-49) mixture gating | 2 §5 | Bayes responsibilities of `LinearGaussianMoE` against scipy densities | `test_dists.py::test_gating_is_bayes_rule` |
+# | [2.51](#eq-2-51)–[2.55](#eq-2-55) Ornstein–Uhlenbeck forward process | 2 §6 | closed-form marginals against simulated chains | `test_bounds_foundations.py::test_wrong_ou_variance_formula_fails` |
+# | [2.56](#eq-2-56)–[2.57](#eq-2-57) ELBO | 2 §7 | log-evidence $=$ ELBO $+$ KL on a conjugate Gaussian model | — |
+# | [2.60](#eq-2-60)–[2.61](#eq-2-61) KL chain rule | 2 §7 | joint KL against marginal plus conditional KL | `test_bounds_foundations.py::test_kl_that_ignores_means_breaks_the_chain_rule` |
+# | [2.64](#eq-2-64) mixture E-step bound | 2 §7 | bound below the objective, tight at the responsibilities | `test_bounds_foundations.py::test_non_tight_variational_distribution_fails` |
+# | [2.65](#eq-2-65)–[2.66](#eq-2-66) KL of diffusion chains | 2 §7 | term-by-term sum against the joint-Gaussian KL; Monte Carlo | `test_bounds_foundations.py::test_diffusion_kl_with_wrong_kernel_variance_fails` |
+# | [2.67](#eq-2-67) episode-based RL as inference | 2 §7 | KL $=-J/\alpha+\mathbb E\log Z$ on a discrete problem | — |
+# | [2.68](#eq-2-68)–[2.71](#eq-2-71) step-based RL as inference | 2 §7 | the Boltzmann policy solves the inference problem | `test_bounds_foundations.py::test_policy_at_wrong_temperature_is_not_the_inference_solution` |
+# | [3.1](#eq-3-1)–[3.4](#eq-3-4), [A.2](#eq-A-2) SVSL decomposition | 3 §1 | Eq. 3.4 against a Monte-Carlo estimate of Eq. 3.3 | `test_bounds_svsl.py::test_decomposition_equals_a_monte_carlo_estimate_of_eq_3_3` |
+# | [A.4](#eq-A-4), [3.5](#eq-3-5) expert bound | 3 §2 | bound below the objective, tight at the old model; improvements carry over | `test_bounds_svsl.py::test_expert_objective_with_flipped_responsibility_sign_fails` |
+# | [3.6](#eq-3-6) context-distribution bound | 3 §3 | the same for $\pi(c\mid o)$ | `test_bounds_svsl.py::test_context_objective_missing_responsibility_term_fails` |
+# | [3.7](#eq-3-7), A.5–A.7 weights, REPS | 3 §4 | bound on $\pi(o)$; the REPS update against the expected softmax | `test_bounds_svsl.py::test_weight_objective_maximiser_is_softmax` |
+# | MORE, contextual MORE | 3 §5 | MORE on a quadratic reward reaches the analytic optimum | `test_erl_more.py::test_more_reaches_analytic_optimum_with_large_eps` |
+# | [C.1](#eq-C-1)–[C.3](#eq-C-3), [5.15](#eq-5-15) entropy lower bound | 5 §1.2 | Monte-Carlo and closed-form $\ell\le\mathcal H$ on a linear-Gaussian chain; the gap equals the chains' KL | `test_bounds_dime.py::test_wrong_bound_estimator_fails` |
+# | [C.29](#eq-C-29)–[C.30](#eq-C-30) tanh correction | 5 §1.3 | squashed entropy by quadrature against $\ell$ plus the log-Jacobian | `test_srl_components.py::test_squash_adds_tanh_correction_to_running_cost` |
+# | [5.16](#eq-5-16)–[5.20](#eq-5-20), [C.11](#eq-C-11) the inference problem | 5 §1.4 | joint KL $=-\mathbb E[Q]-\ell+\log Z$; marginal KL below joint KL | `test_bounds_dime.py::test_check_passes` |
+# | [5.21](#eq-5-21), Prop. 5.4.1 policy evaluation | 5 §2 | the backup with $\alpha\ell$ contracts at rate $\gamma$ to the series of Eq. 5.17 | `test_bounds_dime_policy_iteration.py::test_wrong_sign_of_the_bound_in_the_backup_fails_prop_541` |
+# | [5.22](#eq-5-22), Prop. 5.4.2 policy improvement | 5 §2 | $Q_{\rm new}\ge Q_{\rm old}$ everywhere; the step beats random members of the family | `test_bounds_dime_policy_iteration.py::test_improvement_away_from_the_target_fails_prop_542` |
+# | Prop. 5.4.3 policy iteration | 5 §2 | monotone, ends at the family's optimum found by value iteration | `test_bounds_dime_policy_iteration.py::test_no_improvement_is_monotone_but_not_optimal` |
+# | [5.24](#eq-5-24)–[5.28](#eq-5-28) practical losses | 5 §2b | critic, actor and $\alpha$ losses of a tiny agent against the formulas computed in the cell | `test_dime_update_maths.py::test_actor_loss_and_gradient_follow_eq_5_27` |
+
+# %% [markdown]
 # ## Budgets
 #
 # One environment variable decides how much compute the book spends. Budgets scale
@@ -75,14 +110,16 @@
 # VSLBOOK_BUDGET=full vslbook sweep ...   # the thesis's budgets, on a cluster
 # ```
 #
-# What each notebook runs, and how long it took on a 2-core x86_64 CPU (no GPU), the
-# machine CI runs on:
+# What each notebook runs, and how long its execution took on a 2-core x86_64 CPU (no
+# GPU), the machine CI runs on. At `smoke` the first number is a build that trains its runs,
+# the second one that finds them finished in `runs/`:
 #
 # | notebook | `smoke` | `reduced` |
 # |---|---|---|
-# | `02_foundations` | ERL against SRL on the point-reach task, smoke counts; about 30 s | the same at 5 % of the thesis's counts |
-# | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s | Figs. 3.1, 3.2, 3.5 at 5 % of the thesis's counts, 3 seeds; about 1.5 h (estimated from the per-iteration times, not yet measured end to end) |
-# | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts; about 85 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch |
+# | `00_index` (this page) | 5 s | the same |
+# | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; not yet timed end to end |
+# | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1, 3.2, 3.5, A.1, A.2 at 5 % of the thesis's counts, 3 seeds; about 1.5 h estimated from per-iteration times, not yet timed end to end |
+# | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch, from per-run times |
 #
 # A second `make book` executes only the notebooks whose code changed (an execution cache
 # per budget) and every finished training run is reused from `runs/`.
