@@ -20,7 +20,8 @@ FANCY  := fancy-gym==0.3.0
 # The site typesets math with a MathJax copy it serves itself (offline); npm fetches it once.
 MATHJAX_VERSION := 3.2.2
 MATHJAX := $(VENV)/mathjax/node_modules/mathjax/es5/tex-chtml.js
-# The site's browser test drives Debian's chromium.
+# The site's browser test drives Debian's chromium (with an emoji font: the notebooks' check
+# reports mark results with ✅ / ❌, and the screenshots should show what a reader sees).
 CHROMIUM ?= /usr/bin/chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
@@ -60,7 +61,7 @@ $(MATHJAX): | $(BIN)/python
 
 $(CHROMIUM):
 	$(SUDO) apt-get update -qq
-	DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium >/dev/null
+	DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq chromium fonts-noto-color-emoji >/dev/null
 
 browser: $(CHROMIUM)
 
