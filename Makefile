@@ -24,6 +24,8 @@ MATHJAX := $(VENV)/mathjax/node_modules/mathjax/es5/tex-chtml.js
 # reports mark results with ✅ / ❌, and the screenshots should show what a reader sees).
 CHROMIUM ?= /usr/bin/chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
+# Offscreen MuJoCo pictures (the tasks page, MUJOCO_GL=egl) use Mesa's software EGL.
+GL_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
 VSLBOOK_BUDGET ?= reduced
@@ -31,7 +33,7 @@ export MPLBACKEND ?= Agg
 export MUJOCO_GL ?= disable
 export PYTHONHASHSEED := 0
 
-.PHONY: setup myo book site test test-fast notebooks lab lint clean help browser
+.PHONY: setup myo book site test test-fast notebooks lab lint clean help browser gl
 .DEFAULT_GOAL := help
 
 help:
@@ -65,7 +67,12 @@ $(CHROMIUM):
 
 browser: $(CHROMIUM)
 
-setup: $(STAMP) $(MATHJAX)
+gl:
+	@command -v dpkg >/dev/null 2>&1 || { echo "not a Debian system: install Mesa's EGL ($(GL_PKGS)) yourself"; exit 0; }; \
+	dpkg -s $(GL_PKGS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(GL_PKGS) >/dev/null; }
+
+setup: $(STAMP) $(MATHJAX) gl
 
 # MyoSuite's hand tasks alone (already part of setup); --no-deps keeps the pinned stack.
 myo: | $(BIN)/python
@@ -85,7 +92,7 @@ book: setup
 site: book
 
 # pytest exits 5 when nothing is collected; that is not a failure of the suite.
-test: notebooks $(MATHJAX) browser
+test: notebooks $(MATHJAX) gl browser
 	VSLBOOK_BUDGET=smoke VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
 	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
 	  rc=$$?; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc

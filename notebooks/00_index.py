@@ -52,6 +52,7 @@
 #
 # | thesis | notebook | modules | figures here |
 # |---|---|---|---|
+# | Chs. 3–4 tasks | [`01_tasks`](01_tasks.ipynb) | `vslbook.envs.robot` (every task; `render` for the pictures) | a picture of each MuJoCo scene, live |
 # | Ch. 2 Foundations | [`02_foundations`](02_foundations.ipynb) | `vslbook.bounds.foundations`, `vslbook.dists`, `vslbook.movement`, `vslbook.erl.pg`, `vslbook.envs` | ERL against SRL learning curves, movement primitives (ProMP / DMP / ProDMP), diffusion forward process, live |
 # | Ch. 3 SVSL | [`03_svsl`](03_svsl.ipynb) | `vslbook.erl.svsl` (Algorithm 1), `svsl_model`, `more`, `surrogate`, `reps`, `hireps`, `ladips`, `ppo`; `vslbook.bounds.svsl`; `vslbook.experiments.svsl_*`; `vslbook.envs.robot` | Figs. 3.1, 3.2 (beer pong, table tennis), 3.5, A.1, A.2, live |
 # | Ch. 4 Di-SkilL | `04_diskill` (planned) | `vslbook.erl` | — |
@@ -117,6 +118,7 @@
 # | notebook | `smoke` | `reduced` |
 # |---|---|---|
 # | `00_index` (this page) | 5 s | the same |
+# | `01_tasks` | every task built, a picture of each scene; about 15 s | the same |
 # | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; not yet timed end to end |
 # | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1, 3.2, 3.5, A.1, A.2 at 5 % of the thesis's counts, 3 seeds; about 1.5 h estimated from per-iteration times, not yet timed end to end |
 # | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch, from per-run times |

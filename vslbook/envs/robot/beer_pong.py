@@ -216,6 +216,11 @@ class BeerPong(EpisodicTask):
         excess = np.maximum(self.context_low - c, 0) + np.maximum(c - self.context_high, 0)
         return INVALID_PENALTY - np.sum(excess**2, axis=-1)
 
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The simulator at the start of an episode in ``context`` (see the base class)."""
+        self.reset(self.one_context(context))
+        return self.model, self.data
+
     # -- simulator helpers ----------------------------------------------------------------
     def reset(self, context: np.ndarray) -> None:
         """Robot at rest in q0, cup at (c_x, c_y, 0.840), ball on the hand site."""

@@ -71,6 +71,7 @@ remaining step gets −50 (the code's per-step value) and the episode stops ther
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -199,6 +200,11 @@ class BoxPushingObstacle(EpisodicTask):
         )
 
     # -- simulation ---------------------------------------------------------------------
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The simulator at the start of an episode in ``context`` (see the base class)."""
+        self.reset(self.one_context(context))
+        return self.model, self.data
+
     def reset(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Put robot, box, goal and obstacle at their start; returns (goal pos, goal quat)."""
         m, d = self.model, self.data

@@ -207,6 +207,11 @@ class HopperJump(EpisodicTask):
             raise RuntimeError(f"{MODEL}: unexpected model (nu={m.nu}, nq={m.nq})")
         self._pair = {self._floor, self._foot_geom}
 
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The simulator at the start of an episode in ``context`` (see the base class)."""
+        self.reset(self.one_context(context))
+        return self.model, self.data
+
     def reset(self, context: np.ndarray) -> None:
         """Put the simulator at the start state of ``context`` (goal moved, at rest)."""
         c = np.asarray(context, dtype=np.float64)

@@ -296,6 +296,11 @@ class _ReacherTask(EpisodicTask):
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         return self.episodes(np.asarray(theta)[None], np.asarray(context)[None])[0]
 
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The arm at its start, the target at the goal ``context`` (see the base class)."""
+        self.sim.reset(self.q0, self.one_context(context))
+        return self.sim.model, self.sim.data
+
 
 class Reacher5(_ReacherTask):
     """5LR of Chapter 4 (Section 4.5.1, Appendix B.4.3); see the module docstring.

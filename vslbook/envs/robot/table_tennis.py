@@ -248,10 +248,8 @@ class TableTennis4D(EpisodicTask):
         x, y, v_x = (float(a[0]) for a in self.serve(context))
         return self.simulate(q_d, dq_d, np.array([x, y, v_x]), self.goal(context))
 
-    def simulate(
-        self, q_d: np.ndarray, dq_d: np.ndarray, ball0: np.ndarray, goal: np.ndarray
-    ) -> Episode:
-        """Track ``(q_d, q̇_d)`` ``(≥350, 7)`` with the ball served from ``ball0`` = (x, y, v_x)."""
+    def _start(self, ball0: np.ndarray, goal: np.ndarray) -> None:
+        """Robot at rest in q0, the goal marker on the table, the ball served from ``ball0``."""
         m, d = self.model, self.data
         mujoco.mj_resetData(m, d)
         m.body_pos[self._goal_body] = [goal[0], goal[1], TABLE_HEIGHT]
@@ -260,6 +258,21 @@ class TableTennis4D(EpisodicTask):
         d.qpos[a : a + 3] = [ball0[0], ball0[1], BALL_Z0]
         d.qvel[a : a + 3] = [ball0[2], 0.0, BALL_VZ]
         mujoco.mj_forward(m, d)
+
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The start of an episode in ``context``: ball at its serve, goal marked (see the
+        base class)."""
+        c = self.one_context(context)
+        x, y, v_x = (float(a[0]) for a in self.serve(c))
+        self._start(np.array([x, y, v_x]), self.goal(c))
+        return self.model, self.data
+
+    def simulate(
+        self, q_d: np.ndarray, dq_d: np.ndarray, ball0: np.ndarray, goal: np.ndarray
+    ) -> Episode:
+        """Track ``(q_d, q̇_d)`` ``(≥350, 7)`` with the ball served from ``ball0`` = (x, y, v_x)."""
+        m, d = self.model, self.data
+        self._start(ball0, goal)
 
         n_sub = MAX_STEPS * FRAME_SKIP
         xs = np.empty((n_sub, m.nbody, 3))

@@ -186,6 +186,24 @@ class EpisodicTask:
             raise ValueError(f"{self.name}: theta must be finite")
         return th
 
+    # -- pictures -----------------------------------------------------------------------
+    def scene(self, context: Any) -> tuple[Any, Any]:
+        """The MuJoCo ``(model, data)`` at the start of an episode in ``context``, after a
+        forward pass: what :func:`vslbook.envs.robot.render.render_scene` draws.
+
+        Tasks simulated in MuJoCo override it; a task without a simulator (the planar
+        reacher) has no scene.
+        """
+        raise NotImplementedError(f"{self.name}: no MuJoCo scene (the task is not simulated)")
+
+    def one_context(self, context: Any) -> np.ndarray:
+        """A single valid context ``(d,)``, or a clear error."""
+        c = self.check_contexts(context)
+        if len(c) != 1:
+            raise ValueError(f"{self.name}: expected one context of shape ({self.context_dim},), "
+                             f"got {np.shape(context)}")
+        return c[0]
+
     # -- episodes -----------------------------------------------------------------------
     def episode_args(self, theta: Any, context: Any) -> tuple[np.ndarray, np.ndarray]:
         """One episode's ``theta`` (n_params,) and ``context`` (d,) as floats, or a clear error."""
