@@ -237,3 +237,26 @@ def test_one_step_env_passes_check_env() -> None:
     obs, _ = env.reset(seed=0, options={"context": CTX})
     _, r, term, trunc, info = env.step(np.zeros(28))
     assert term and not trunc and info["executed"] and np.isfinite(r)
+
+
+@pytest.mark.parametrize("breakage", ["velocity", "position", "nan"])
+def test_unstable_catches_every_kind_of_breakdown(breakage):
+    """MuJoCo resets a diverged state to the model's default silently (bad velocity or
+    position warning); the task must still see that the simulation broke down."""
+    import mujoco
+
+    from vslbook.envs.robot.box_pushing import BoxPushingObstacle, unstable
+
+    task = BoxPushingObstacle()
+    m, d = task.scene(task.sample_contexts(1, np.random.default_rng(0))[0])
+    assert not unstable(d)
+    mujoco.mj_step(m, d)
+    assert not unstable(d), "a normal step is stable"
+    if breakage == "velocity":
+        d.qvel[:7] = 1e12
+    elif breakage == "position":
+        d.qpos[:7] = 1e12
+    else:
+        d.qpos[0] = np.nan
+    mujoco.mj_step(m, d)
+    assert unstable(d)

@@ -44,6 +44,8 @@ TASKS: dict[str, tuple[str, str]] = {
 #: Step-based gymnasium ids (PPO baselines): id → module:class.
 STEP_IDS: dict[str, str] = {
     "vslbook/Reacher5Ch3Step-v0": _R + "reacher5_step:Reacher5Ch3StepEnv",
+    "vslbook/Reacher5SparseStep-v0": _R + "reacher5_sparse_step:Reacher5SparseStepEnv",
+    "vslbook/BoxPushingObstacleStep-v0": _R + "box_pushing_step:BoxPushingObstacleStepEnv",
 }
 
 

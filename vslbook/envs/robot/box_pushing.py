@@ -64,7 +64,8 @@ farthest goal, worst orientation) and below the returns of random θ ~ N(0, I) (
 excess term points back into the valid region. ``joint_limit_check=False`` simulates
 every θ as the authors' code does.
 
-Unstable simulation (MuJoCo's bad-acceleration warning or a non-finite state): every
+Unstable simulation (MuJoCo's bad-acceleration, -velocity or -position warning, or a
+non-finite state): every
 remaining step gets −50 (the code's per-step value) and the episode stops there.
 """
 
@@ -131,6 +132,32 @@ def step_reward(
         r_rot = math.acos(min(abs(float(np.dot(box_quat, goal_quat))), 1.0)) / math.pi
         r += -350.0 * r_goal - 200.0 * r_rot
     return r
+
+
+_BAD_STATE = (
+    mujoco.mjtWarning.mjWARN_BADQACC,
+    mujoco.mjtWarning.mjWARN_BADQVEL,
+    mujoco.mjtWarning.mjWARN_BADQPOS,
+)
+
+
+def apply_torque(m: mujoco.MjModel, d: mujoco.MjData, action: np.ndarray) -> np.ndarray:
+    """One control step of the Panda: the normalised ``action`` (clipped to [-1, 1]) becomes
+    the torque ``10 a`` plus gravity/Coriolis compensation, clipped to the motor limits, held
+    for ``FRAME_SKIP`` physics steps. Returns ``10 a`` (what the action cost is taken of)."""
+    torque = ACTION_SCALE * np.clip(action, -1.0, 1.0)
+    d.ctrl[:] = np.clip(torque + d.qfrc_bias[:7], -TORQUE_MAX, TORQUE_MAX)
+    mujoco.mj_step(m, d, nstep=FRAME_SKIP)
+    return torque
+
+
+def unstable(d: mujoco.MjData) -> bool:
+    """Whether the simulation broke down: MuJoCo warned of a bad acceleration, velocity or
+    position (it then resets the state to the model's default silently), or the state is
+    not finite."""
+    return any(d.warning[w].number > 0 for w in _BAD_STATE) or not bool(
+        np.all(np.isfinite(d.qpos))
+    )
 
 
 def is_success(pos_error: float, rot_error: float) -> bool:
@@ -249,14 +276,11 @@ class BoxPushingObstacle(EpisodicTask):
         m, d = self.model, self.data
         gpos, gquat = self.reset(context)
         ret, pos_err, rot_err = 0.0, math.nan, math.nan
-        bad = mujoco.mjtWarning.mjWARN_BADQACC
         for t in range(HORIZON):
             a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
-            torque = ACTION_SCALE * np.clip(a, -1.0, 1.0)
-            d.ctrl[:] = np.clip(torque + d.qfrc_bias[:7], -TORQUE_MAX, TORQUE_MAX)
-            mujoco.mj_step(m, d, nstep=FRAME_SKIP)
+            torque = apply_torque(m, d, a)
             self.physics_steps += FRAME_SKIP
-            if d.warning[bad].number > 0 or not np.all(np.isfinite(d.qpos)):
+            if unstable(d):
                 ret += UNSTABLE_STEP * (HORIZON - t)
                 pos_err = rot_err = math.nan
                 break
