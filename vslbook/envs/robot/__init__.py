@@ -35,6 +35,7 @@ TASKS: dict[str, tuple[str, str]] = {
     "table-tennis-ch3": (_R + "table_tennis_ch3:TableTennisCh3", "vslbook/TableTennisCh3-v0"),
     "beer-pong": (_R + "beer_pong:BeerPong", "vslbook/BeerPong-v0"),
     "hopper-jump": (_R + "hopper_jump:HopperJump", "vslbook/HopperJump-v0"),
+    "mini-golf": (_R + "mini_golf:MiniGolf", "vslbook/MiniGolf-v0"),
     "box-pushing-obstacle": (
         _R + "box_pushing:BoxPushingObstacle",
         "vslbook/BoxPushingObstacle-v0",

@@ -41,6 +41,7 @@ CAMERAS: dict[str, Camera] = {
     "beer-pong": Camera((0.0, -0.9, 0.9), 3.4, 160.0, -28.0),
     "hopper-jump": Camera((0.9, 0.0, 0.7), 4.2, 90.0, -12.0),
     "box-pushing-obstacle": Camera((0.45, -0.1, 0.0), 2.2, 180.0, -60.0),
+    "mini-golf": Camera((0.45, -0.1, 0.0), 2.2, 180.0, -60.0),
 }
 
 
@@ -64,8 +65,6 @@ def render_scene(
     camera: Camera | None = None,
 ) -> np.ndarray:
     """An ``(height, width, 3)`` uint8 picture of ``task`` at the start of ``context``."""
-    import mujoco
-
     gl_backend()
     for name, value in (("width", width), ("height", height)):
         if not isinstance(value, int) or not 16 <= value <= 4096:
@@ -75,6 +74,16 @@ def render_scene(
             raise ValueError(f"no camera for task {task.name!r}; known: {sorted(CAMERAS)}")
         camera = CAMERAS[task.name]
     model, data = task.scene(context)
+    return render_data(model, data, camera, width=width, height=height)
+
+
+def render_data(
+    model: Any, data: Any, camera: Camera, *, width: int = 480, height: int = 360
+) -> np.ndarray:
+    """An ``(height, width, 3)`` uint8 picture of the MuJoCo state ``data`` (forwarded)."""
+    import mujoco
+
+    gl_backend()
     cam = mujoco.MjvCamera()
     cam.type = mujoco.mjtCamera.mjCAMERA_FREE
     cam.lookat[:] = camera.lookat

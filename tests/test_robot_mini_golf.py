@@ -1,0 +1,268 @@
+"""Robot Mini Golf (thesis Section 4.5.1, Appendix B.4.4)."""
+
+from __future__ import annotations
+
+import math
+
+import mujoco
+import numpy as np
+import pytest
+
+from vslbook.envs.robot.mini_golf import (
+    HORIZON,
+    Q0,
+    MiniGolf,
+    final_reward,
+    invalid_penalty,
+    step_cost,
+)
+from vslbook.envs.robot.task import EpisodicEnv
+
+CTX = np.array([0.3, -0.5, 0.44, 0.55])  # obstacle far left, goal gap centred at x = 0.55
+# A ball placed just touching the club head's lower edge (the robot holds q0): its first
+# contact is a hit; pushed by hand towards (aim, -0.7) at 1.6 m/s.
+BALL_AT_CLUB = np.array([0.44, 0.6095, 0.0063])
+Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+Q_MIN = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+
+
+@pytest.fixture(scope="module")
+def task() -> MiniGolf:
+    return MiniGolf()
+
+
+def _still() -> tuple[np.ndarray, np.ndarray]:
+    return np.repeat(Q0[None], HORIZON + 1, axis=0), np.zeros((HORIZON + 1, 7))
+
+
+def _push(task: MiniGolf, start: np.ndarray, aim: float, speed: float = 1.6):
+    v = np.array([aim, -0.7]) - start[:2]
+    v = speed * v / np.linalg.norm(v)
+    return task.simulate(*_still(), CTX, ball_pos=start, ball_vel=[v[0], v[1], 0.0])
+
+
+def _costs(torque: np.ndarray) -> float:
+    return -0.0005 * float(np.sum(torque[:99] ** 2))
+
+
+def test_layout(task: MiniGolf) -> None:
+    assert task.n_params == 29 and task.context_dim == 4
+    assert task.context_names == ("x_obstacle", "y_obstacle", "x_ball", "x_goal")
+    assert task.mp.tau_bounds == (0.45, 1.7) and task.mp.n_basis == 4
+    m = task.model
+    assert m.opt.timestep == pytest.approx(0.002)
+    assert mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "box_0") == -1
+    assert m.nq == 9 + 7 and m.nmocap == 2  # arm + fingers + ball; obstacle, goal
+    with pytest.raises(ValueError, match="reward"):
+        MiniGolf(reward="dense")
+    with pytest.raises(ValueError, match=r"theta must have shape \(29,\)"):
+        task.episode(np.zeros(28), CTX)
+
+
+def test_scene_bodies_and_geoms(task: MiniGolf) -> None:
+    c = np.array([0.37, -0.23, 0.52, 0.31])
+    task.reset(c)
+    m, d = task.model, task.data
+    ball = m.geom("ball_contact")
+    assert ball.size[0] == pytest.approx(0.025)
+    assert m.body_mass[m.body("ball").id] == pytest.approx(0.05)
+    np.testing.assert_allclose(ball.friction, [0.1, 0.1, 0.1])
+    assert ball.priority[0] == 1 and ball.condim[0] == 4
+    np.testing.assert_allclose(ball.solref, [0.1, 0.03])
+    np.testing.assert_allclose(d.xpos[m.body("ball").id], [0.52, 0.5, 0.005])
+    np.testing.assert_allclose(d.qpos[:7], Q0)
+    for name, x in (("side_wall_left", 0.15), ("side_wall_right", 0.7)):
+        np.testing.assert_allclose(d.geom(name).xpos, [x, -0.05, 0.025], atol=1e-12)
+        np.testing.assert_allclose(m.geom(name).size, [0.005, 0.65, 0.08])
+    np.testing.assert_allclose(d.geom("static_obstacle_geom").xpos, [0.425, -0.0625, 0.0])
+    np.testing.assert_allclose(m.geom("static_obstacle_geom").size, [0.02, 0.02, 0.1])
+    obs = m.body("obstacle").id
+    assert m.body_mocapid[obs] >= 0
+    np.testing.assert_allclose(d.geom("obstacle_geom").xpos, [0.37, -0.23, 0.0])
+    np.testing.assert_allclose(m.geom("obstacle_geom").size, [0.03, 0.03, 0.1])
+    for name in ("goal_wall_left", "goal_wall_right"):
+        np.testing.assert_allclose(m.geom(name).size, [0.4, 0.005, 0.08])
+        assert d.geom(name).xpos[1] == pytest.approx(-0.7)
+    np.testing.assert_allclose(d.site("ball_target").xpos, [0.31, -0.7, 0.005], atol=1e-12)
+    # the club: a 1.5 cm rod with a head, the rod tip at the head
+    assert m.geom("rod_contact").size[0] == pytest.approx(0.015)
+    np.testing.assert_allclose(m.geom("rod_contact2").size, [0.03, 0.02, 0.015])
+    np.testing.assert_allclose(m.site("rod_tip").pos, [0, 0, 0.225])
+    tip, head = d.site("rod_tip").xpos, d.geom("rod_contact2").xpos
+    assert abs(tip[1] - 0.65) < 0.01 and tip[2] == pytest.approx(0.035, abs=0.002)
+    assert np.linalg.norm(head - tip) == pytest.approx(0.015, abs=1e-6)
+
+
+@pytest.mark.parametrize("x_goal", [0.25, 0.43, 0.6])
+def test_goal_gap_is_5_6_cm_centred_at_goal(task: MiniGolf, x_goal: float) -> None:
+    task.reset(np.array([0.45, -0.3, 0.4, x_goal]))
+    m, d = task.model, task.data
+    left, right = d.geom("goal_wall_left"), d.geom("goal_wall_right")
+    inner_left = left.xpos[0] + m.geom("goal_wall_left").size[0]
+    inner_right = right.xpos[0] - m.geom("goal_wall_right").size[0]
+    assert inner_right - inner_left == pytest.approx(0.056, abs=1e-12)
+    assert (inner_left + inner_right) / 2 == pytest.approx(x_goal, abs=1e-12)
+    # the walls reach past both side walls: the gap is the only way through
+    assert left.xpos[0] - 0.4 < 0.15 and right.xpos[0] + 0.4 > 0.7
+
+
+def test_context_sampler_ranges(task: MiniGolf) -> None:
+    c = task.sample_contexts(3000, np.random.default_rng(0))
+    lo, hi = np.array([0.3, -0.5, 0.25, 0.25]), np.array([0.6, -0.1, 0.6, 0.6])
+    assert np.all((c >= lo) & (c <= hi))
+    np.testing.assert_array_less(c.min(axis=0), lo + 0.01)
+    np.testing.assert_array_less(hi - 0.01, c.max(axis=0))
+    # uniform: the means sit mid-range (4 standard errors)
+    se = (hi - lo) / math.sqrt(12 * 3000)
+    np.testing.assert_array_less(np.abs(c.mean(axis=0) - (lo + hi) / 2), 4 * se)
+    again = task.sample_contexts(3000, np.random.default_rng(0))
+    np.testing.assert_array_equal(c, again)
+    # the authors' wider goal range is outside the thesis's context space
+    with pytest.raises(ValueError, match="outside the task's context space"):
+        task.evaluate(np.zeros(29), [0.4, -0.3, 0.4, 0.65], workers=0)
+
+
+def test_invalid_theta_penalised_not_simulated(task: MiniGolf) -> None:
+    steps = task.physics_steps
+    th = np.zeros(29)
+    th[0] = 2.0  # τ 0.3 above its bound; zero weights keep q_d = q0
+    r = task.evaluate(th, CTX, workers=0)
+    assert not r.executed[0] and not r.success[0] and r.n_rejected == 1
+    assert r.returns[0] == pytest.approx(-20 * 3 * 0.3 - 5)
+    assert math.isnan(r.info["hit"][0])
+    th[0] = 0.3
+    assert task.evaluate(th, CTX, workers=0).returns[0] == pytest.approx(-20 * 3 * 0.15 - 5)
+    th = np.zeros(29)
+    th[0] = 1.0
+    th[1 + 3 * 4 : 1 + 4 * 4] = 60.0  # joint 4 pushed above its upper limit (-0.0698)
+    q_d, _ = task.mp.trajectory(th, Q0)
+    hi = float(np.mean(np.maximum(q_d - Q_MAX, 0.0)))
+    lo = float(np.mean(np.maximum(Q_MIN - q_d, 0.0)))
+    assert hi > 0
+    assert invalid_penalty(th, q_d) == pytest.approx(-20 * (hi + lo) - 5)
+    r = task.evaluate(th, CTX, workers=0)
+    assert not r.executed[0] and r.returns[0] == pytest.approx(-20 * (hi + lo) - 5)
+    assert task.physics_steps == steps
+    # τ on its bounds is valid and simulated
+    th = np.zeros(29)
+    for tau in (0.45, 1.7):
+        th[0] = tau
+        assert invalid_penalty(th, task.mp.trajectory(th, Q0)[0]) == 0.0
+    r = task.evaluate(th, CTX, workers=0)
+    assert r.executed[0] and task.physics_steps == steps + 1000
+    free = MiniGolf(joint_limit_check=False)
+    th[0] = 2.0
+    assert free.evaluate(th, CTX, workers=0).executed[0] and free.physics_steps == 1000
+
+
+def test_ball_through_the_gap_after_a_hit_succeeds(task: MiniGolf) -> None:
+    tr = _push(task, BALL_AT_CLUB, aim=0.563)
+    assert tr.hit and tr.passed and not tr.unstable and tr.steps == HORIZON
+    np.testing.assert_allclose(tr.ball[0, :2], BALL_AT_CLUB[:2], atol=0.01)
+    crossing = np.flatnonzero(tr.ball[:, 1] < -0.7)[0]
+    assert abs(tr.ball[crossing, 0] - 0.55) < 0.028 - 0.025 + 0.005  # inside the gap
+    assert np.any(tr.ball[:, 1] - 0.025 < -0.75)
+    assert task.trace_return(tr) == pytest.approx(_costs(tr.torque) + 6.0, rel=1e-12)
+
+
+def test_ball_aimed_at_a_wall_does_not_pass(task: MiniGolf) -> None:
+    tr = _push(task, BALL_AT_CLUB, aim=0.65)
+    assert tr.hit and not tr.passed
+    assert tr.ball[:, 1].min() > -0.725  # bounced off the goal wall
+    # third case (thesis), computed from the recorded ball positions by hand
+    goal = np.array([0.55, -0.7, 0.005])
+    d_goal = np.min(np.sqrt(np.sum((tr.ball - goal) ** 2, axis=1)))
+    y_min = tr.ball[:, 1].min()
+    expected = 2 - 2 * math.tanh(d_goal) - math.tanh(abs(y_min + 0.75))
+    assert task.trace_return(tr) == pytest.approx(_costs(tr.torque) + expected, rel=1e-12)
+    code = MiniGolf(reward="code")
+    tr_code = _push(code, BALL_AT_CLUB, aim=0.65)
+    np.testing.assert_array_equal(tr_code.ball, tr.ball)
+    expected_code = 2 - 2 * math.tanh(d_goal) + 0.5 * (1 - math.tanh(y_min + 0.75))
+    assert code.trace_return(tr_code) == pytest.approx(_costs(tr.torque) + expected_code, rel=1e-12)
+
+
+def test_ball_through_the_gap_without_a_hit_is_no_success(task: MiniGolf) -> None:
+    start = np.array([0.44, 0.55, 0.0063])  # 2 cm in front of the club: never touched
+    tr = _push(task, start, aim=0.55)
+    assert not tr.hit and not tr.passed
+    assert tr.ball[:, 1].min() < -0.8  # it did roll through the gap
+    d_tip = np.min(np.sqrt(np.sum((tr.ball - tr.rod_tip) ** 2, axis=1)))
+    assert 0.05 < d_tip < 0.15
+    expected = 0.2 - 0.2 * math.tanh(d_tip)
+    assert task.trace_return(tr) == pytest.approx(_costs(tr.torque) + expected, rel=1e-12)
+
+
+def test_reward_terms_by_hand() -> None:
+    assert step_cost(np.array([1.0, -2.0, 0, 0, 0, 0, 3.0])) == pytest.approx(-0.0005 * 14)
+    assert final_reward(False, False, 0.5, 9.0, 9.0) == pytest.approx(0.2 - 0.2 * math.tanh(0.5))
+    assert final_reward(False, True, 0.0, 9.0, 9.0) == pytest.approx(0.2)  # no hit, no bonus
+    assert final_reward(True, False, 9.0, 0.3, -0.6) == pytest.approx(
+        2 - 2 * math.tanh(0.3) - math.tanh(0.15)
+    )
+    assert final_reward(True, False, 9.0, 0.3, -0.6, "code") == pytest.approx(
+        2 - 2 * math.tanh(0.3) + 0.5 - 0.5 * math.tanh(0.15)
+    )
+    assert final_reward(True, True, 9.0, 9.0, 9.0) == 6.0
+    with pytest.raises(ValueError, match="variant"):
+        final_reward(True, True, 0, 0, 0, "dense")
+
+
+def test_still_robot_episode(task: MiniGolf) -> None:
+    th = np.zeros(29)
+    th[0] = 1.0
+    r = task.evaluate(th, CTX, workers=0)
+    assert r.executed[0] and not r.success[0]
+    assert r.info["hit"][0] == 0.0 and r.info["min_ball_y"][0] == pytest.approx(0.5, abs=1e-3)
+    # club head 15 cm behind the ball; the robot holds still, so the costs are tiny
+    d_tip = r.info["min_rod_ball_dist"][0]
+    assert 0.12 < d_tip < 0.18
+    assert r.returns[0] == pytest.approx(0.2 - 0.2 * math.tanh(d_tip), abs=1e-3)
+
+
+def test_pd_tracks_a_ramp(task: MiniGolf) -> None:
+    # joints 1 and 4 ramp by 0.3 and 0.2 rad over the 2 s (ball out of the way at x = 0.25)
+    s = np.linspace(0.0, 1.0, HORIZON + 1)
+    q_d = Q0 + np.outer(s, [0.3, 0, 0, 0.2, 0, 0, 0])
+    dq_d = np.tile([0.15, 0, 0, 0.1, 0, 0, 0], (HORIZON + 1, 1))
+    tr = task.simulate(q_d, dq_d, np.array([0.3, -0.5, 0.25, 0.55]))
+    assert not tr.unstable and tr.steps == HORIZON
+    np.testing.assert_allclose(task.data.qpos[:7], q_d[-1], atol=0.03)
+
+
+def test_evaluate_is_deterministic(task: MiniGolf) -> None:
+    rng = np.random.default_rng(11)
+    c = task.sample_contexts(2, rng)
+    th = np.concatenate([rng.uniform(0.5, 1.6, (2, 1)), 0.5 * rng.normal(size=(2, 28))], axis=1)
+    a = task.evaluate(th, c, workers=0)
+    b = MiniGolf().evaluate(th, c, workers=0)
+    assert a.executed.all()
+    np.testing.assert_array_equal(a.returns, b.returns)
+    for k in task.info_keys:
+        np.testing.assert_array_equal(a.info[k], b.info[k])
+
+
+@pytest.mark.slow
+def test_workers_match_in_process(task: MiniGolf) -> None:
+    rng = np.random.default_rng(5)
+    c = task.sample_contexts(3, rng)
+    th = np.concatenate([rng.uniform(0.5, 1.6, (3, 1)), 0.5 * rng.normal(size=(3, 28))], axis=1)
+    a = task.evaluate(th, c, workers=0)
+    try:
+        w = task.evaluate(th, c, workers=2)
+    finally:
+        task.close()
+    np.testing.assert_array_equal(a.returns, w.returns)
+    np.testing.assert_array_equal(a.success, w.success)
+
+
+def test_one_step_env_passes_check_env() -> None:
+    from gymnasium.utils.env_checker import check_env
+
+    env = EpisodicEnv(MiniGolf)
+    check_env(env, skip_render_check=True)
+    env.reset(seed=0, options={"context": CTX})
+    th = np.zeros(29)
+    th[0] = 2.0
+    _, r, term, trunc, info = env.step(th)
+    assert term and not trunc and not info["executed"] and r == pytest.approx(-23.0)

@@ -1,0 +1,349 @@
+"""Robot Mini Golf ("MG", thesis Section 4.5.1 and Appendix B.4.4).
+
+A 7-DoF Franka Panda holding a club (the push rod with a club head) has to hit a ball so
+that it rolls past a moving and a static obstacle through a tight goal: two walls on the
+line y = −0.7 leave a 5.6 cm gap for the 5 cm ball. Model: built in code on fancy-gym
+0.3.0's Panda with push rod (:mod:`vslbook.envs.robot.mini_golf_model`, where every body,
+size and contact parameter is listed).
+
+Context ``c = [x_obs, y_obs, x_ball, x_goal]`` (the authors' code's order): the moving
+(green) obstacle's position x_obs ∈ [0.3, 0.6], y_obs ∈ [−0.5, −0.1], the ball's start
+x_ball ∈ [0.25, 0.6] (it starts at (x_ball, 0.5, 0.005)) and the centre of the goal gap
+x_goal ∈ [0.25, 0.6] (B.4.4); uniform, no rejection. ⚠ The authors' code samples the goal
+from the wider range x_goal ∈ [0.18, 0.67] (the channel between the side walls spans
+x ∈ [0.155, 0.695]); the thesis's range is used here.
+
+Parameters θ (29, B.4.4): ``[τ, w (7 joints × 4 basis, joint-major)]``, a ProDMP
+(:class:`~vslbook.envs.robot.primitives.ProDMPSpec`) with learned duration τ ∈ [0.45, 1.7] s,
+no learned start time, goal disabled (the attractor is the start posture), ``weights_scale``
+0.3, basis auto-scaled, spring constant α = 25, phase decay 3, RBF width = centre spacing /
+√3 (the code's bandwidth factor 3). The robot always starts at rest at q0 = [0.901, 0.949,
+0.152, −1.055, −0.136, 1.995, 1.826] (the club head 0.15 m behind the ball's start line).
+
+Validity (before simulation, B.4.4 and the authors' code): θ is invalid if τ lies outside
+[0.45, 1.7] or any desired joint position q_d leaves the Franka limits. An invalid θ is not
+simulated (``executed=False``, not counted as a sample) and returns
+``−20 (3 Δτ + ē_high + ē_low) − 5`` with Δτ the distance of τ to its bounds and ē the mean
+excess of q_d over the upper / under the lower limits over all steps and joints
+(:func:`~vslbook.envs.robot.primitives.joint_limit_excess`). This is the authors' code; the
+thesis writes ``−20 (r_traj + r_dur) − 5`` with r_dur = −3 Δτ and r_traj the *sum* of
+|q_d| − |q_b| over entries whose magnitude exceeds the *upper* bound, whose signs do not
+combine into a penalty and which is no joint-limit test for the asymmetric Franka ranges;
+the code's form is the consistent reading of it.
+
+Timing and control (as Box Pushing, :mod:`vslbook.envs.robot.box_pushing`): timestep
+0.002 s, 10 substeps per control step (dt 0.02 s), T = 100 steps (2 s). During step t the
+PD law on the normalised action ``a = clip(K_p (q_d[t+1] − q) + K_d (q̇_d[t+1] − q̇), −1, 1)``
+with K_p = 0.01·[120, 120, 120, 120, 50, 30, 10], K_d = 0.01·[10, 10, 10, 10, 6, 5, 3] gives
+the motor command ``clip(10 a + qfrc_bias, ±[90, 90, 90, 90, 12, 12, 12])``, held for the 10
+substeps.
+
+Events, checked after every substep: **hit**: a contact between the ball and the club
+(``rod_contact`` or ``rod_contact2``); **passed**: after the hit, y_ball − 0.025 < −0.75,
+i.e. the ball's centre lies more than 2.5 cm behind the goal line (the margin covers MuJoCo's
+soft contacts, which may let a ball sink into a wall for a moment). The ball can only
+cross the line through the gap: the goal walls close the channel between the side walls and
+a ceiling closes the goal line above z = 0.1.
+
+Reward (B.4.4, :func:`step_cost` and :func:`final_reward`): every step t < T costs
+``−0.0005 τ_t`` with τ_t = Σ_i (10 a_i)² (the commanded torque without the bias
+compensation). The last step instead gives, with minima over all substeps of the episode,
+
+* no hit: ``0.2 − 0.2 tanh(min ‖p_rod_tip − p_ball‖)``;
+* hit, not passed: ``2 − 2 tanh(min ‖p_ball − p_goal‖) − tanh(|min y_ball − (−0.75)|)``,
+  p_goal the site ``ball_target`` at (x_goal, −0.7, 0.005);
+* hit and passed: ``6``.
+
+The return is the sum. ⚠ The thesis does not say at which time p_ball,y enters the third
+case; the minimum over the episode is used, as in the authors' code. The code's third case is
+``2 − 2 tanh(min ‖p_ball − p_goal‖) + 0.5 (1 − tanh(min y_ball + 0.75))``, i.e. the y-term
+weighed by 0.5 with an offset of +0.5 (``reward="code"`` gives it). Unstable simulation
+(MuJoCo's bad-acceleration warning or a non-finite state): that step gives −50 (the code's
+value) instead of its reward and the episode ends.
+
+Success: the ball passed the goal after the hit (the thesis's fourth case). Info: ``hit``,
+``passed`` (0/1), ``min_rod_ball_dist``, ``min_ball_goal_dist``, ``min_ball_y``,
+``unstable`` (0/1), ``steps`` (control steps simulated); NaN for invalid θ.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import mujoco
+import numpy as np
+
+from vslbook.envs.robot.mini_golf_model import (
+    BALL_RADIUS,
+    BALL_START_Y,
+    BALL_START_Z,
+    GOAL_Y,
+    OBSTACLE_Z,
+    build_model,
+)
+from vslbook.envs.robot.primitives import ProDMPSpec, joint_limit_excess
+from vslbook.envs.robot.task import Episode, EpisodicTask
+
+Q0 = np.array([0.90138834, 0.94911663, 0.15175606, -1.0552696, -0.13568928, 1.99531533, 1.82624438])
+P_GAINS = 0.01 * np.array([120.0, 120.0, 120.0, 120.0, 50.0, 30.0, 10.0])
+D_GAINS = 0.01 * np.array([10.0, 10.0, 10.0, 10.0, 6.0, 5.0, 3.0])
+TORQUE_MAX = np.array([90.0, 90.0, 90.0, 90.0, 12.0, 12.0, 12.0])
+ACTION_SCALE = 10.0
+Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
+Q_MIN = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
+DT, FRAME_SKIP, HORIZON = 0.02, 10, 100
+TAU_BOUNDS = (0.45, 1.7)
+#: The ball has passed the goal once y_ball − radius < PASS_Y (after the hit).
+PASS_Y = -0.75
+ACTION_COST = 0.0005
+UNSTABLE_STEP = -50.0
+INVALID_SCALE, INVALID_OFFSET, INVALID_TAU_WEIGHT = 20.0, -5.0, 3.0
+PASSED_REWARD = 6.0
+REWARD_VARIANTS = ("thesis", "code")
+
+SPEC = ProDMPSpec(
+    n_dof=7, n_basis=4, dt=DT, duration=HORIZON * DT, alpha=25.0, alpha_phase=3.0,
+    tau_bounds=TAU_BOUNDS, goal="disabled", weights_scale=0.3, auto_scale_basis=True,
+    width=(1.0 / 3.0) / math.sqrt(3.0),
+)  # fmt: skip
+
+
+def step_cost(torque: np.ndarray) -> float:
+    """Reward of a step before the last: −0.0005 Σ_i torque_i² (torque = 10 a)."""
+    torque = np.asarray(torque, dtype=np.float64)
+    return -ACTION_COST * float(np.sum(np.square(torque)))
+
+
+def final_reward(
+    hit: bool,
+    passed: bool,
+    min_rod_ball: float,
+    min_ball_goal: float,
+    min_ball_y: float,
+    variant: str = "thesis",
+) -> float:
+    """Reward of the last step (B.4.4's cases 2-4; see the module docstring).
+
+    Args:
+        hit: the club touched the ball during the episode.
+        passed: the ball passed the goal after the hit.
+        min_rod_ball: min over the episode of ‖p_rod_tip − p_ball‖.
+        min_ball_goal: min over the episode of ‖p_ball − p_goal‖.
+        min_ball_y: min over the episode of the ball's y.
+        variant: ``"thesis"`` or ``"code"`` (the authors' third case).
+    """
+    if variant not in REWARD_VARIANTS:
+        raise ValueError(f"variant must be one of {REWARD_VARIANTS}, got {variant!r}")
+    if not hit:
+        return 0.2 - 0.2 * math.tanh(min_rod_ball)
+    if passed:
+        return PASSED_REWARD
+    goal_term = 2.0 - 2.0 * math.tanh(min_ball_goal)
+    if variant == "thesis":
+        return goal_term - math.tanh(abs(min_ball_y - PASS_Y))
+    return goal_term + 0.5 * (1.0 - math.tanh(min_ball_y - PASS_Y))
+
+
+def invalid_penalty(theta: np.ndarray, q_d: np.ndarray) -> float:
+    """0 for a valid θ, else ``−20 (3 Δτ + ē_high + ē_low) − 5`` (module docstring)."""
+    d_tau, _ = SPEC.bound_excess(theta)
+    q_d = np.asarray(q_d, dtype=np.float64)
+    if d_tau <= 0.0 and not np.any(q_d > Q_MAX) and not np.any(q_d < Q_MIN):
+        return 0.0
+    high, low = joint_limit_excess(q_d, Q_MIN, Q_MAX)
+    return -INVALID_SCALE * (INVALID_TAU_WEIGHT * d_tau + high + low) + INVALID_OFFSET
+
+
+@dataclass
+class Trace:
+    """What one simulated episode recorded (for the reward and for inspection).
+
+    Attributes:
+        ball, rod_tip: positions after every substep, ``(n_substeps, 3)``.
+        torque: commanded torque 10 a of every control step, ``(steps, 7)``.
+        goal: the goal point (site ``ball_target``).
+        hit, passed, unstable: the events of the module docstring.
+        steps: control steps simulated (the last one may be the unstable one).
+    """
+
+    ball: np.ndarray
+    rod_tip: np.ndarray
+    torque: np.ndarray
+    goal: np.ndarray
+    hit: bool
+    passed: bool
+    unstable: bool
+    steps: int
+
+    @property
+    def min_rod_ball(self) -> float:
+        return float(np.min(np.linalg.norm(self.ball - self.rod_tip, axis=1)))
+
+    @property
+    def min_ball_goal(self) -> float:
+        return float(np.min(np.linalg.norm(self.ball - self.goal, axis=1)))
+
+    @property
+    def min_ball_y(self) -> float:
+        return float(np.min(self.ball[:, 1]))
+
+
+class MiniGolf(EpisodicTask):
+    """Robot Mini Golf (MG): see the module docstring for every detail.
+
+    Args:
+        reward: ``"thesis"`` (B.4.4) or ``"code"`` (the authors' weighting of the y-term).
+        joint_limit_check: reject θ whose τ or q_d leave their bounds without simulating
+            (False simulates every θ, τ clipped to its bounds).
+    """
+
+    name: ClassVar[str] = "mini-golf"
+    context_names: ClassVar[tuple[str, ...]] = ("x_obstacle", "y_obstacle", "x_ball", "x_goal")
+    context_low: ClassVar[np.ndarray] = np.array([0.3, -0.5, 0.25, 0.25])
+    context_high: ClassVar[np.ndarray] = np.array([0.6, -0.1, 0.6, 0.6])
+    n_params: ClassVar[int] = SPEC.n_params
+    info_keys: ClassVar[tuple[str, ...]] = (
+        "hit", "passed", "min_rod_ball_dist", "min_ball_goal_dist", "min_ball_y", "unstable",
+        "steps",
+    )  # fmt: skip
+    has_success: ClassVar[bool] = True
+    mp: ClassVar[ProDMPSpec] = SPEC
+
+    def __init__(self, reward: str = "thesis", joint_limit_check: bool = True) -> None:
+        if reward not in REWARD_VARIANTS:
+            raise ValueError(f"reward must be one of {REWARD_VARIANTS}, got {reward!r}")
+        super().__init__(reward=reward, joint_limit_check=joint_limit_check)
+        self.reward = reward
+        self.joint_limit_check = bool(joint_limit_check)
+        self.model = build_model()
+        self.data = mujoco.MjData(self.model)
+        m = self.model
+        self._ball_qpos = int(m.jnt_qposadr[m.joint("ball_joint").id])
+        self._ball_qvel = int(m.jnt_dofadr[m.joint("ball_joint").id])
+        self._ball_body = int(m.body("ball").id)
+        self._ball_geom = int(m.geom("ball_contact").id)
+        self._club_geoms = (int(m.geom("rod_contact").id), int(m.geom("rod_contact2").id))
+        self._rod_tip = int(m.site("rod_tip").id)
+        self._goal_site = int(m.site("ball_target").id)
+        self._mocap = {n: int(m.body_mocapid[m.body(n).id]) for n in ("obstacle", "goal")}
+        #: Physics steps taken by this instance (lets tests see that nothing was simulated).
+        self.physics_steps = 0
+
+    # -- simulation ---------------------------------------------------------------------
+    def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
+        """The simulator at the start of an episode in ``context`` (see the base class)."""
+        self.reset(self.one_context(context))
+        return self.model, self.data
+
+    def reset(self, context: np.ndarray) -> None:
+        """Robot at q0 at rest, ball at (x_ball, 0.5, 0.005), obstacle and goal placed."""
+        m, d = self.model, self.data
+        c = np.asarray(context, dtype=np.float64).reshape(self.context_dim)
+        mujoco.mj_resetData(m, d)
+        d.qpos[:7] = Q0
+        a = self._ball_qpos
+        d.qpos[a : a + 7] = [c[2], BALL_START_Y, BALL_START_Z, 1.0, 0.0, 0.0, 0.0]
+        d.mocap_pos[self._mocap["obstacle"]] = [c[0], c[1], OBSTACLE_Z]
+        d.mocap_pos[self._mocap["goal"]] = [c[3], GOAL_Y, 0.0]
+        for name in ("obstacle", "goal"):
+            d.mocap_quat[self._mocap[name]] = [1.0, 0.0, 0.0, 0.0]
+        mujoco.mj_forward(m, d)
+
+    def _club_contact(self) -> bool:
+        d = self.data
+        if d.ncon == 0:
+            return False
+        pairs = d.contact.geom[: d.ncon]
+        with_ball = pairs[(pairs == self._ball_geom).any(axis=1)]
+        return bool(np.isin(with_ball, self._club_geoms).any())
+
+    def simulate(
+        self,
+        q_d: np.ndarray,
+        dq_d: np.ndarray,
+        context: np.ndarray,
+        ball_pos: np.ndarray | None = None,
+        ball_vel: np.ndarray | None = None,
+    ) -> Trace:
+        """Track ``(q_d, q̇_d)`` ``(HORIZON + 1, 7)`` in ``context``; returns the :class:`Trace`.
+
+        ``ball_pos`` / ``ball_vel`` (3,) override the ball's start position / linear
+        velocity after the reset (a ball placed and pushed by hand, for tests).
+        """
+        m, d = self.model, self.data
+        self.reset(context)
+        if ball_pos is not None:
+            d.qpos[self._ball_qpos : self._ball_qpos + 3] = ball_pos
+        if ball_vel is not None:
+            d.qvel[self._ball_qvel : self._ball_qvel + 3] = ball_vel
+        mujoco.mj_forward(m, d)
+        goal = d.site_xpos[self._goal_site].copy()
+        start_ball, start_tip = d.xpos[self._ball_body].copy(), d.site_xpos[self._rod_tip].copy()
+        n_sub = HORIZON * FRAME_SKIP
+        ball, tip = np.empty((n_sub, 3)), np.empty((n_sub, 3))
+        torques = np.empty((HORIZON, 7))
+        bad, warnings = int(mujoco.mjtWarning.mjWARN_BADQACC), d.warning.number
+        hit = passed = unstable = False
+        i = t = 0
+        for t in range(HORIZON):
+            a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
+            torques[t] = ACTION_SCALE * np.clip(a, -1.0, 1.0)
+            d.ctrl[:] = np.clip(torques[t] + d.qfrc_bias[:7], -TORQUE_MAX, TORQUE_MAX)
+            for _ in range(FRAME_SKIP):
+                mujoco.mj_step(m, d)
+                if warnings[bad] > 0 or not np.all(np.isfinite(d.qpos)):
+                    unstable = True
+                    break
+                if not hit:
+                    hit = self._club_contact()
+                elif not passed:
+                    passed = bool(d.xpos[self._ball_body, 1] - BALL_RADIUS < PASS_Y)
+                ball[i] = d.xpos[self._ball_body]
+                tip[i] = d.site_xpos[self._rod_tip]
+                i += 1
+            if unstable:
+                break
+        self.physics_steps += i + int(unstable)  # the unstable substep was taken as well
+        if i == 0:  # unstable in the very first substep: the start state is all there is
+            ball[0], tip[0], i = start_ball, start_tip, 1
+        return Trace(
+            ball=ball[:i].copy(), rod_tip=tip[:i].copy(), torque=torques[: t + 1].copy(),
+            goal=goal, hit=hit, passed=passed and not unstable, unstable=unstable, steps=t + 1,
+        )  # fmt: skip
+
+    def trace_return(self, trace: Trace) -> float:
+        """The episode return of a :class:`Trace` (step costs, then the final reward or −50)."""
+        if trace.unstable:
+            costs = sum(step_cost(tq) for tq in trace.torque[: trace.steps - 1])
+            return float(costs + UNSTABLE_STEP)
+        costs = sum(step_cost(tq) for tq in trace.torque[: HORIZON - 1])
+        final = final_reward(
+            trace.hit, trace.passed, trace.min_rod_ball, trace.min_ball_goal,
+            trace.min_ball_y, self.reward,
+        )  # fmt: skip
+        return float(costs + final)
+
+    def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
+        theta, context = self.episode_args(theta, context)
+        q_d, dq_d = self.mp.trajectory(theta, Q0)
+        if self.joint_limit_check:
+            penalty = invalid_penalty(theta, q_d)
+            if penalty < 0.0:
+                return Episode(penalty, False, False, dict.fromkeys(self.info_keys, math.nan))
+        trace = self.simulate(q_d, dq_d, context)
+        success = bool(trace.hit and trace.passed)
+        info = {
+            "hit": float(trace.hit),
+            "passed": float(trace.passed),
+            "min_rod_ball_dist": trace.min_rod_ball,
+            "min_ball_goal_dist": trace.min_ball_goal,
+            "min_ball_y": trace.min_ball_y,
+            "unstable": float(trace.unstable),
+            "steps": float(trace.steps),
+        }
+        return Episode(self.trace_return(trace), success, True, info)
+
+    def __repr__(self) -> str:
+        return f"MiniGolf(reward={self.reward!r}, joint_limit_check={self.joint_limit_check})"
