@@ -214,3 +214,25 @@ def test_one_step_env_is_deterministic():
     _, r2, _, _, info2 = env.step(THETA_HIT)
     assert r == r2 and info.keys() == info2.keys()
     np.testing.assert_array_equal([info[k] for k in info], [info2[k] for k in info])
+
+
+def test_strike_keeps_the_frame_of_closest_approach(task):
+    """Fig. 3.3's frame: the recorded state is where ball and racket were closest, the
+    episode is the ordinary one, and an invalid θ gives no frame."""
+    import mujoco
+
+    ep, frame = task.strike(THETA_HIT, CONTEXT)
+    plain = task.episode(THETA_HIT, CONTEXT)
+    assert ep.ret == plain.ret and ep.info == plain.info
+    m, d = task.scene(CONTEXT)
+    d.qpos[:] = frame
+    mujoco.mj_kinematics(m, d)
+    ball, racket = d.xpos[m.body("target_ball").id], d.xpos[m.body("EE").id]
+    assert np.linalg.norm(ball - racket) == pytest.approx(ep.info["min_ball_racket_dist"],
+                                                          abs=1e-9)
+    assert ep.info["min_ball_racket_dist"] < 0.1
+    bad = np.zeros(23)
+    bad[0], bad[1] = 2.0, 0.3  # τ above its bound: rejected, not simulated
+    ep, frame = task.strike(bad, CONTEXT)
+    assert frame is None and not ep.executed
+    assert task._record is None  # recording is off again for ordinary episodes

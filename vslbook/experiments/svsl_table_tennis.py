@@ -24,6 +24,10 @@ What is computed here (the task-independent code is
 * :func:`draw_context_coverage` — Fig. 3.2d: SVSL's per-expert context Gaussians π(c | o)
   projected (marginalised) on the goal plane (x_des, y_des) and on the incoming-ball plane
   (x_inc, y_inc).
+* :func:`versatile_strikes` / :func:`draw_fig_3_3` — Fig. 3.3: for one fixed context,
+  strikes of different experts (θ ~ π(θ | c, o), experts drawn from π(o | c), distinct
+  ones first), each rendered at the moment the ball is closest to the racket
+  (:meth:`TableTennis4D.strike`); needs an offscreen OpenGL backend (``MUJOCO_GL=egl``).
 * :func:`goal_success_grid` — not in the thesis: the success rate over a grid of goals for
   one fixed incoming ball (the means of experts drawn from π(o | c) executed).
 
@@ -65,6 +69,7 @@ __all__ = [
     "curve_frame",
     "draw_context_coverage",
     "draw_entropy_curves",
+    "draw_fig_3_3",
     "draw_goal_success_grid",
     "draw_learning_curves",
     "goal_success_grid",
@@ -76,6 +81,7 @@ __all__ = [
     "run_table_tennis",
     "svsl_episodes",
     "table_tennis_counts",
+    "versatile_strikes",
 ]
 
 TASK = "table-tennis-ch3"
@@ -283,3 +289,71 @@ def draw_goal_success_grid(ax: plt.Axes, grid: np.ndarray, title: str = "") -> p
     return mx.draw_success_grid(
         ax, grid, (lo[0], hi[0], lo[1], hi[1]), title=title, labels=PLANES["goal"][1]
     )
+
+
+#: Fig. 3.3's view: the robot's end of the table, from the side and a little above.
+STRIKE_CAMERA_SPEC = ((1.1, 0.0, 1.0), 2.4, 150.0, -18.0)
+
+
+def versatile_strikes(
+    model: Any, context: Any = None, *, n: int = 3, seed: int = 0, max_draws: int = 500
+) -> tuple[np.ndarray, list[dict[str, Any]]]:
+    """Fig. 3.3's strikes of a trained SVSL (or HiREPS / LaDiPS) ``model``: ``n`` draws
+    θ ~ π(θ | c) for one context, experts that
+    were not drawn yet preferred (a model with fewer than ``n`` experts repeats some).
+
+    ``context`` defaults to the goal box's centre with :func:`default_incoming`. Returns the
+    context and, per strike, ``expert``, ``theta``, ``episode`` (the task's Episode) and
+    ``frame`` (the simulator ``qpos`` when ball and racket were closest; None if θ was
+    invalid and not simulated).
+    """
+    mix = mixture_of(model)
+    task = _task()
+    if context is None:
+        goal = 0.5 * (task.valid_low[:2] + task.valid_high[:2])
+        context = np.r_[goal, default_incoming()]
+    c = task.one_context(context)
+    if not isinstance(n, int) or n < 1:
+        raise ValueError(f"n must be a positive int, got {n!r}")
+    rng = np.random.default_rng(seed)
+    picks: list[dict[str, Any]] = []
+    used: list[int] = []
+    for _ in range(max_draws):
+        exclude = np.array(used) if len(used) < mix.n_experts else None
+        theta, o = mix.sample(c[None], rng, exclude=exclude)
+        episode, frame = task.strike(theta[0], c)
+        picks.append({"expert": int(o[0]), "theta": theta[0], "episode": episode,
+                      "frame": frame})
+        used.append(int(o[0]))
+        if len(picks) == n:
+            break
+    return c, picks
+
+
+def draw_fig_3_3(axes: Any, context: np.ndarray, picks: list[dict[str, Any]]) -> None:
+    """One rendered strike per axis: the robot and ball at the closest approach, with the
+    expert, whether the ball was hit and where it landed."""
+    import mujoco
+
+    from vslbook.envs.robot.render import Camera, render_data
+
+    task = _task()
+    camera = Camera(*STRIKE_CAMERA_SPEC)
+    for ax, pick in zip(np.ravel(axes), picks, strict=False):
+        m, d = task.scene(context)
+        if pick["frame"] is not None:
+            d.qpos[:] = pick["frame"]
+            mujoco.mj_forward(m, d)
+        ax.imshow(render_data(m, d, camera, width=480, height=360))
+        info = pick["episode"].info
+        if pick["frame"] is None:
+            what = "invalid θ, not simulated"
+        elif info.get("hit", 0.0) > 0:
+            dist = info.get("landing_dist", float("nan"))
+            what = (f"hit, landed {dist:.2f} m from the goal" if np.isfinite(dist)
+                    else "hit, did not land on the table")
+        else:
+            what = f"missed (closest {info.get('min_ball_racket_dist', float('nan')):.2f} m)"
+        ax.set_title(f"expert {pick['expert']}: {what}\nreturn {pick['episode'].ret:.2f}",
+                     fontsize=9)
+        ax.axis("off")

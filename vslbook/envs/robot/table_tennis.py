@@ -205,6 +205,7 @@ class TableTennis4D(EpisodicTask):
         ):
             raise RuntimeError("the model's motors must clamp ctrl to [-1, 1]")
         self.sim_steps = 0  # physics sub-steps taken by this instance (tests and benchmarks)
+        self._record: list[np.ndarray] | None = None  # qpos per physics step, see strike()
 
     # -- contexts -----------------------------------------------------------------------
     def serve(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -248,6 +249,19 @@ class TableTennis4D(EpisodicTask):
         x, y, v_x = (float(a[0]) for a in self.serve(context))
         return self.simulate(q_d, dq_d, np.array([x, y, v_x]), self.goal(context))
 
+    def strike(self, theta: Any, context: Any) -> tuple[Episode, np.ndarray | None]:
+        """One episode, and the simulator's ``qpos`` at the moment the ball was closest to the
+        racket (``None`` when θ was invalid and nothing was simulated): the frame a picture of
+        the strike shows (Fig. 3.3)."""
+        theta, context = self.episode_args(theta, context)
+        self._record = []
+        try:
+            episode = self.episode(theta, context)
+            frame = self._record[0] if self._record else None
+        finally:
+            self._record = None
+        return episode, frame
+
     def _start(self, ball0: np.ndarray, goal: np.ndarray) -> None:
         """Robot at rest in q0, the goal marker on the table, the ball served from ``ball0``."""
         m, d = self.model, self.data
@@ -287,9 +301,12 @@ class TableTennis4D(EpisodicTask):
         landing: np.ndarray | None = None
         landed_on_table = False
         i = k = 0
+        record = self._record
         for k in range(MAX_STEPS):
             ctrl[:] = feedforward[k] - KP * qpos[:7] - KD * qvel[:7]
             for _ in range(FRAME_SKIP):
+                if record is not None:  # the state whose positions mj_step leaves in xpos
+                    record.append(qpos.copy())
                 mujoco.mj_step(m, d)
                 xs[i] = xpos
                 i += 1
@@ -314,6 +331,9 @@ class TableTennis4D(EpisodicTask):
                 break
         self.sim_steps += i
         ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
+        if record is not None:  # keep the physics step where ball and racket were closest
+            closest = int(np.argmin(np.sum((ball - racket) ** 2, axis=1)))
+            record[:] = [record[closest]]
         counted = landing if landed_on_table or self.floor_counts_as_landing else None
         dist = float(np.linalg.norm(landing[:2] - goal)) if landing is not None else math.nan
         ret = UNSTABLE_RETURN if unstable else staged_reward(ball, racket, goal, hit, counted)
