@@ -54,7 +54,7 @@
 # |---|---|---|---|
 # | Chs. 3–4 tasks | [`01_tasks`](01_tasks.ipynb) | `vslbook.envs.robot` (every task; `render` for the pictures) | a picture of each MuJoCo scene, live |
 # | Ch. 2 Foundations | [`02_foundations`](02_foundations.ipynb) | `vslbook.bounds.foundations`, `vslbook.dists`, `vslbook.movement`, `vslbook.erl.pg`, `vslbook.envs` | ERL against SRL learning curves, movement primitives (ProMP / DMP / ProDMP), diffusion forward process, live |
-# | Ch. 3 SVSL | [`03_svsl`](03_svsl.ipynb) | `vslbook.erl.svsl` (Algorithm 1), `svsl_model`, `more`, `surrogate`, `reps`, `hireps`, `ladips`, `ppo`; `vslbook.bounds.svsl`; `vslbook.experiments.svsl_*`; `vslbook.envs.robot` | Figs. 3.1, 3.2 (beer pong, table tennis), 3.5, A.1, A.2, live |
+# | Ch. 3 SVSL | [`03_svsl`](03_svsl.ipynb) | `vslbook.erl.svsl` (Algorithm 1), `svsl_model`, `more`, `surrogate`, `reps`, `hireps`, `ladips`, `ppo`; `vslbook.bounds.svsl`; `vslbook.experiments.svsl_*`; `vslbook.envs.robot` | Figs. 3.1, 3.2 (beer pong, table tennis), 3.3 (rendered), 3.5, A.1, A.2, live |
 # | Ch. 4 Di-SkilL | `04_diskill` (planned) | `vslbook.erl` | — |
 # | Ch. 5 DIME | [`05_dime`](05_dime.ipynb) | `vslbook.srl` (diffusion policy, distributional CrossQ critic, BatchRenorm, the loop `srl.dime`), `vslbook.bounds.dime`, `vslbook.envs.step_based`, `vslbook.experiments` | Fig. 5.1, 5.7 and the ablations (5.2c, 5.4, 5.6, 5.8, C.2) live; Figs. 5.2a–b and 5.3 from the published runs next to ours |
 #
