@@ -24,8 +24,8 @@ MATHJAX := $(VENV)/mathjax/node_modules/mathjax/es5/tex-chtml.js
 # reports mark results with ✅ / ❌, and the screenshots should show what a reader sees).
 CHROMIUM ?= /usr/bin/chromium
 SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
-# Offscreen MuJoCo pictures (the tasks page, MUJOCO_GL=egl) use Mesa's software EGL.
-GL_PKGS := libegl1 libegl-mesa0 libgl1-mesa-dri
+# Offscreen MuJoCo pictures (the tasks page, Fig. 3.3) use Mesa's OSMesa (MUJOCO_GL=osmesa).
+GL_PKGS := libosmesa6
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
 VSLBOOK_BUDGET ?= reduced
@@ -68,7 +68,7 @@ $(CHROMIUM):
 browser: $(CHROMIUM)
 
 gl:
-	@command -v dpkg >/dev/null 2>&1 || { echo "not a Debian system: install Mesa's EGL ($(GL_PKGS)) yourself"; exit 0; }; \
+	@command -v dpkg >/dev/null 2>&1 || { echo "not a Debian system: install Mesa's OSMesa ($(GL_PKGS)) yourself"; exit 0; }; \
 	dpkg -s $(GL_PKGS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
 	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(GL_PKGS) >/dev/null; }
 

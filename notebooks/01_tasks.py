@@ -26,13 +26,14 @@
 # information.
 #
 # Pictures are rendered offscreen; that needs an OpenGL backend without a screen, chosen
-# before MuJoCo is first imported. `make setup` installs Mesa's software EGL.
+# before MuJoCo is first imported: Mesa's OSMesa (`MUJOCO_GL=osmesa`, installed by
+# `make setup`) on a machine without a GPU, EGL on one with a GPU.
 
 # %%
 import os
 
 if os.environ.get("MUJOCO_GL") not in ("egl", "osmesa"):
-    os.environ["MUJOCO_GL"] = "egl"   # offscreen pictures (the tests run with rendering off)
+    os.environ["MUJOCO_GL"] = "osmesa"  # offscreen pictures (the tests run with rendering off)
 
 import matplotlib.pyplot as plt
 import numpy as np

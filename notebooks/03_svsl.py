@@ -43,7 +43,7 @@
 import os
 
 if os.environ.get("MUJOCO_GL") not in ("egl", "osmesa"):
-    os.environ["MUJOCO_GL"] = "egl"  # offscreen pictures (Fig. 3.3); set before MuJoCo loads
+    os.environ["MUJOCO_GL"] = "osmesa"  # offscreen pictures (Fig. 3.3), before MuJoCo loads
 
 import matplotlib.pyplot as plt
 import numpy as np

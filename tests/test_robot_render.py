@@ -2,7 +2,7 @@
 
 The scene tests read the MuJoCo state by the model's own names and compare it with the
 context, independently of how each task places things. The picture test renders in a
-subprocess with Mesa's EGL (the test process keeps MUJOCO_GL=disable).
+subprocess with Mesa's OSMesa (the test process keeps MUJOCO_GL=disable).
 """
 
 from __future__ import annotations
@@ -108,7 +108,7 @@ json.dump(out, sys.stdout)
 
 @pytest.mark.slow
 def test_pictures_render_and_follow_the_context():
-    env = {**os.environ, "MUJOCO_GL": "egl", "OMP_NUM_THREADS": "1"}
+    env = {**os.environ, "MUJOCO_GL": "osmesa", "OMP_NUM_THREADS": "1"}
     proc = subprocess.run([sys.executable, "-c", _RENDER], capture_output=True, text=True,
                           env=env, timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]

@@ -27,7 +27,8 @@ What is computed here (the task-independent code is
 * :func:`versatile_strikes` / :func:`draw_fig_3_3` — Fig. 3.3: for one fixed context,
   strikes of different experts (θ ~ π(θ | c, o), experts drawn from π(o | c), distinct
   ones first), each rendered at the moment the ball is closest to the racket
-  (:meth:`TableTennis4D.strike`); needs an offscreen OpenGL backend (``MUJOCO_GL=egl``).
+  (:meth:`TableTennis4D.strike`); needs an offscreen OpenGL backend
+  (``MUJOCO_GL=osmesa`` or ``egl``).
 * :func:`goal_success_grid` — not in the thesis: the success rate over a grid of goals for
   one fixed incoming ball (the means of experts drawn from π(o | c) executed).
 

@@ -2,8 +2,9 @@
 
 :func:`render_scene` draws :meth:`EpisodicTask.scene` (the start of an episode in one
 context) from the task's camera in :data:`CAMERAS`. Offscreen rendering needs an OpenGL
-backend without a screen: ``MUJOCO_GL=egl`` (Mesa's software EGL is enough; ``make setup``
-installs it) or ``osmesa``, set before MuJoCo is first imported. With ``MUJOCO_GL=disable``
+backend without a screen, set before MuJoCo is first imported: ``MUJOCO_GL=osmesa`` (Mesa's
+software renderer, which ``make setup`` installs; about 0.5 s for a 400 × 300 picture on
+one core) or ``egl`` where a GPU exists. With ``MUJOCO_GL=disable``
 (what the tests use) :func:`render_scene` raises a clear error instead of failing deep
 inside MuJoCo.
 """
