@@ -25,6 +25,12 @@
 # penalised without being simulated) and returns returns, success and per-episode
 # information.
 #
+# **These are re-implementations**, written from the thesis's descriptions on today's
+# simulators, not the authors' environments: models were patched for MuJoCo 3, two scenes
+# (box pushing's obstacle, mini golf) were built here, and where the thesis and the
+# authors' code disagree the thesis is followed (each module's docstring lists where). So
+# returns compare with the thesis's numbers **in shape only**, never in absolute value.
+#
 # Pictures are rendered offscreen; that needs an OpenGL backend without a screen, chosen
 # before MuJoCo is first imported: Mesa's OSMesa (`MUJOCO_GL=osmesa`, installed by
 # `make setup`) on a machine without a GPU, EGL on one with a GPU.
@@ -65,6 +71,54 @@ print(f"{'task':{width}s}  dim c  params  success  contexts")
 for name, dim, n_params, success, contexts in rows:
     print(f"{name:{width}s}  {dim:5d}  {n_params:6d}  {str(success):7s}  {contexts}")
 assert all(r[2] > 0 for r in rows), "every task has primitive parameters"
+
+# %% [markdown]
+# ## What success means
+#
+# | task | success |
+# |---|---|
+# | `planar-reacher` | none (Fig. 3.1 compares the tip's distance to the target and collisions) |
+# | `reacher5-ch3`, `reacher5` | none (the thesis reports returns) |
+# | `table-tennis-ch3`, `table-tennis-4d`, `table-tennis-hard` | the returned ball lands on the opponent's half within 0.2 m of the goal |
+# | `beer-pong` | the ball ends in the cup |
+# | `hopper-jump` | none (the thesis reports the return; `info` has the maximum height and the distances to the goal) |
+# | `box-pushing-obstacle` | at the end the box is within 5 cm and 0.5 rad of the target pose |
+# | `mini-golf` | the ball, after the club touched it, passes through the goal gap |
+#
+# ## The context spaces
+#
+# 2000 contexts from each task's $p(c)$, projected on pairs of its context dimensions:
+# the boxes are the ranges, the empty parts inside them what the rejection rules remove
+# (table tennis: serves that would not clear the net or land on the table; box pushing:
+# goals too close to the box's start, obstacles not between start and goal).
+
+# %%
+rng = np.random.default_rng(0)
+panels = []
+for name in TASKS:
+    task = make_task(name)
+    c = task.sample_contexts(2000, rng)
+    names = task.context_names
+    pairs = [(i, i + 1) for i in range(0, task.context_dim - 1, 2)]
+    if task.context_dim % 2:  # an odd dimension: pair the last one with the first
+        pairs.append((task.context_dim - 1, 0))
+    panels += [(name, c, names, task.context_low, task.context_high, p) for p in pairs]
+    assert np.all(task.context_valid(c)), f"{name}: p(c) drew a context its rules reject"
+    task.close()
+cols = 5
+rows_ = -(-len(panels) // cols)
+fig, axes = plt.subplots(rows_, cols, figsize=(3.1 * cols, 2.7 * rows_))
+for ax, (name, c, names, lo, hi, (i, j)) in zip(axes.flat, panels, strict=False):
+    ax.scatter(c[:, i], c[:, j], s=1, alpha=0.3)
+    ax.add_patch(plt.Rectangle((lo[i], lo[j]), hi[i] - lo[i], hi[j] - lo[j], fill=False,
+                               lw=0.8, color="0.3"))
+    ax.set(xlabel=names[i], ylabel=names[j])
+    ax.set_title(name, fontsize=8)
+    ax.tick_params(labelsize=7)
+for ax in list(axes.flat)[len(panels):]:
+    ax.axis("off")
+fig.tight_layout()
+plt.show()
 
 # %% [markdown]
 # ## The scenes
