@@ -58,6 +58,7 @@ from vslbook.envs.robot.box_pushing import (
     is_success,
     unstable,
 )
+from vslbook.envs.robot.task import check_action
 
 N_JOINTS = 7
 OBS_DIM = 2 * N_JOINTS + 3 + 4 + 2 + 4 + 2 + 1
@@ -119,22 +120,11 @@ class BoxPushingObstacleStepEnv(gym.Env):
         self._done = False
         return self._obs(), {"context": self._context.copy(), "success": False}
 
-    def _check_action(self, action: Any) -> np.ndarray:
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"action must be {N_JOINTS} numbers, got {action!r}") from err
-        if a.shape != (N_JOINTS,):
-            raise ValueError(f"action must have shape ({N_JOINTS},), got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()}")
-        return np.clip(a, -1.0, 1.0)
-
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Apply the torque law to ``action`` for one control step (10 physics steps)."""
         if self._done:
             raise RuntimeError("episode is over (or reset() was never called): call reset()")
-        a = self._check_action(action)
+        a = check_action(action, N_JOINTS)
         task, m, d = self.task, self.task.model, self.task.data
         torque = apply_torque(m, d, a)
         task.physics_steps += FRAME_SKIP

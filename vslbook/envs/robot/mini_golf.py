@@ -75,6 +75,19 @@ from typing import Any, ClassVar
 import mujoco
 import numpy as np
 
+# The Panda's PD gains, motor limits, joint limits and timing are box pushing's (B.4.4: "as
+# in box pushing").
+from vslbook.envs.robot.box_pushing import (  # noqa: F401  (re-exported for the tests)
+    ACTION_SCALE,
+    D_GAINS,
+    DT,
+    FRAME_SKIP,
+    HORIZON,
+    P_GAINS,
+    Q_MAX,
+    Q_MIN,
+    TORQUE_MAX,
+)
 from vslbook.envs.robot.mini_golf_model import (
     BALL_RADIUS,
     BALL_START_Y,
@@ -87,13 +100,6 @@ from vslbook.envs.robot.primitives import ProDMPSpec, joint_limit_excess
 from vslbook.envs.robot.task import Episode, EpisodicTask
 
 Q0 = np.array([0.90138834, 0.94911663, 0.15175606, -1.0552696, -0.13568928, 1.99531533, 1.82624438])
-P_GAINS = 0.01 * np.array([120.0, 120.0, 120.0, 120.0, 50.0, 30.0, 10.0])
-D_GAINS = 0.01 * np.array([10.0, 10.0, 10.0, 10.0, 6.0, 5.0, 3.0])
-TORQUE_MAX = np.array([90.0, 90.0, 90.0, 90.0, 12.0, 12.0, 12.0])
-ACTION_SCALE = 10.0
-Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
-Q_MIN = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
-DT, FRAME_SKIP, HORIZON = 0.02, 10, 100
 TAU_BOUNDS = (0.45, 1.7)
 #: The ball has passed the goal once y_ball − radius < PASS_Y (after the hit).
 PASS_Y = -0.75

@@ -42,6 +42,7 @@ from vslbook.envs.robot.reacher5 import (
     rewards_5lr,
     tip_position,
 )
+from vslbook.envs.robot.task import check_action
 
 #: [cos q (5), sin q (5), goal (2), q̇ (5), tip − goal (2), t / T (1)]
 OBS_DIM = 3 * N_LINKS + 2 + 2 + 1
@@ -95,22 +96,11 @@ class Reacher5SparseStepEnv(gym.Env):
         self._done = False
         return self._obs(), {"goal": self._goal.copy()}
 
-    def _check_action(self, action: Any) -> np.ndarray:
-        try:
-            a = np.asarray(action, dtype=np.float64)
-        except (TypeError, ValueError) as err:
-            raise ValueError(f"action must be {N_LINKS} numbers, got {action!r}") from err
-        if a.shape != (N_LINKS,):
-            raise ValueError(f"action must have shape ({N_LINKS},), got shape {a.shape}")
-        if not np.all(np.isfinite(a)):
-            raise ValueError(f"action must be finite, got {a.tolist()}")
-        return np.clip(a, -1.0, 1.0)
-
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         """Hold the (clipped) command for one control step and score the state after it."""
         if self._done:
             raise RuntimeError("episode is over (or reset() was never called): call reset()")
-        a = self._check_action(action)
+        a = check_action(action, N_LINKS)
         self.sim.step(a)
         self._t += 1
         tip = tip_position(self.sim.q)

@@ -341,6 +341,20 @@ def _check_count(name: str, value: Any) -> int:
 _WORKER_TASK: EpisodicTask | None = None
 
 
+def check_action(action: Any, n: int) -> np.ndarray:
+    """A step-based env's ``action`` as ``n`` finite floats clipped to [-1, 1], or a clear
+    ``ValueError`` naming what is wrong."""
+    try:
+        a = np.asarray(action, dtype=np.float64)
+    except (TypeError, ValueError) as err:
+        raise ValueError(f"action must be {n} numbers, got {action!r}") from err
+    if a.shape != (n,):
+        raise ValueError(f"action must have shape ({n},), got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        raise ValueError(f"action must be finite, got {a.tolist()}")
+    return np.clip(a, -1.0, 1.0)
+
+
 def _worker_init(cls: type[EpisodicTask], kwargs: dict[str, Any]) -> None:
     global _WORKER_TASK
     # Ctrl-C (or a Jupyter kernel's interrupt) goes to the whole process group: the parent
