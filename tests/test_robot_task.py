@@ -213,3 +213,28 @@ def test_the_one_step_env_leaves_numbers_that_do_not_apply_out_of_its_info():
     env.reset(seed=0)
     _, _, _, _, info = env.step(np.zeros(2))
     assert "distance" not in info and info["executed"]
+
+
+def test_robot_ids_are_known_to_vslbook_make():
+    """`vslbook.envs.make` (and so `vslbook run`) finds the robot tasks without the caller
+    importing vslbook.envs.robot first; the check runs in a fresh interpreter."""
+    import subprocess
+    import sys
+
+    code = (
+        "import vslbook.envs as E, sys\n"
+        "assert 'vslbook.envs.robot' not in sys.modules\n"
+        "E.check_env_id('vslbook/MiniGolf-v0')\n"
+        "env = E.make('vslbook/BoxPushingObstacleStep-v0')\n"
+        "print(env.observation_space.shape)\n"
+        "try:\n"
+        "    E.check_env_id('vslbook/MiniGolff-v0')\n"
+        "except ValueError as e:\n"
+        "    assert 'vslbook/MiniGolf-v0' in str(e), e\n"
+        "else:\n"
+        "    raise SystemExit('a misspelt id was accepted')\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip() == "(30,)"

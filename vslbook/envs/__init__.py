@@ -31,10 +31,18 @@ def check_env_id(env_id: str) -> None:
     """Raise a clear ValueError unless :func:`make` knows ``env_id``; builds no simulator.
 
     Known are the step-based tasks (:data:`STEP_TASKS`: dm_control, gymnasium MuJoCo,
-    MyoSuite and the point mass) and every id in gymnasium's registry. The message names
+    MyoSuite and the point mass), the robot tasks of Chapters 3-4
+    (:mod:`vslbook.envs.robot`, one-step and step-based ids) and every id in gymnasium's
+    registry. The message names
     the id, suggests close matches and lists the ids vslbook provides.
     """
     if isinstance(env_id, str) and (env_id in STEP_TASKS or env_id in gym.registry):
+        return
+    # The robot tasks of Chapters 3-4 register on first use: a run that never asks for one
+    # never imports them (DIME's runs are independent of vslbook/envs/robot/).
+    import vslbook.envs.robot  # noqa: F401
+
+    if isinstance(env_id, str) and env_id in gym.registry:
         return
     known = sorted({k for k in gym.registry if k.startswith("vslbook/")} | set(STEP_TASKS))
     close = difflib.get_close_matches(str(env_id), sorted(set(gym.registry) | set(known)), n=3)
