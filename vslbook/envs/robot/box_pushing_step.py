@@ -58,7 +58,7 @@ from vslbook.envs.robot.box_pushing import (
     is_success,
     unstable,
 )
-from vslbook.envs.robot.task import check_action
+from vslbook.envs.robot.task import check_action, context_from_options
 
 N_JOINTS = 7
 OBS_DIM = 2 * N_JOINTS + 3 + 4 + 2 + 4 + 2 + 1
@@ -107,14 +107,7 @@ class BoxPushingObstacleStepEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode: robot at q0, box at its start, goal and obstacle from c."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"context"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected only 'context'")
-        if "context" in options:
-            self._context = self.task.check_contexts(options["context"])[0]
-        else:
-            self._context = self.task.sample_contexts(1, self.np_random)[0]
+        self._context = context_from_options(self.task, options, "context", self.np_random)
         self._goal_pos, self._goal_quat = self.task.reset(self._context)
         self._t = 0
         self._done = False

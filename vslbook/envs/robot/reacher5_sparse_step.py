@@ -42,7 +42,7 @@ from vslbook.envs.robot.reacher5 import (
     rewards_5lr,
     tip_position,
 )
-from vslbook.envs.robot.task import check_action
+from vslbook.envs.robot.task import check_action, context_from_options
 
 #: [cos q (5), sin q (5), goal (2), q̇ (5), tip − goal (2), t / T (1)]
 OBS_DIM = 3 * N_LINKS + 2 + 2 + 1
@@ -83,14 +83,7 @@ class Reacher5SparseStepEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         """Start an episode: arm straight to the right at rest, goal from p(c) or options."""
         super().reset(seed=seed)
-        options = dict(options or {})
-        unknown = set(options) - {"goal"}
-        if unknown:
-            raise ValueError(f"unknown reset options {sorted(unknown)}; expected only 'goal'")
-        if "goal" in options:
-            self._goal = self.task.check_contexts(options["goal"])[0]
-        else:
-            self._goal = self.task.sample_contexts(1, self.np_random)[0]
+        self._goal = context_from_options(self.task, options, "goal", self.np_random)
         self.sim.reset(Q0_RIGHT, self._goal)
         self._t = 0
         self._done = False

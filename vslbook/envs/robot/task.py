@@ -341,6 +341,21 @@ def _check_count(name: str, value: Any) -> int:
 _WORKER_TASK: EpisodicTask | None = None
 
 
+def context_from_options(
+    task: EpisodicTask, options: dict[str, Any] | None, key: str, rng: np.random.Generator
+) -> np.ndarray:
+    """A step-based env's context at ``reset``: ``options[key]`` (checked against the task's
+    context space) or a draw from the task's p(c) with ``rng``; any other option is a clear
+    error."""
+    options = dict(options or {})
+    unknown = set(options) - {key}
+    if unknown:
+        raise ValueError(f"unknown reset options {sorted(unknown)}; expected only {key!r}")
+    if key in options:
+        return task.one_context(options[key])
+    return task.sample_contexts(1, rng)[0]
+
+
 def check_action(action: Any, n: int) -> np.ndarray:
     """A step-based env's ``action`` as ``n`` finite floats clipped to [-1, 1], or a clear
     ``ValueError`` naming what is wrong."""
