@@ -19,6 +19,7 @@ from typing import Any
 PLUGIN_MODULES: tuple[str, ...] = (
     "vslbook.erl.pg",
     "vslbook.srl.dime",
+    "vslbook.experiments.ch3_algorithms",
     "vslbook.figures",
 )
 
@@ -37,6 +38,12 @@ class Algorithm:
         independent_of: package-relative paths (``"erl/"``) the algorithm's runs never
             import; editing them does not make its finished runs stale
             (:func:`vslbook.results.code_fingerprint`).
+        defaults: ``defaults(env, budget, overrides) -> config``, the configuration of
+            ``env`` at ``budget`` for an algorithm whose hyper-parameters depend on the task
+            (the Chapter 3 presets, Tables A.1-A.5); it receives the ``--set`` overrides
+            so that a preset chosen by one of them (the 5-link reacher's reward) can be
+            found. Such a config holds the budget's counts itself; None: ``config()``,
+            whose full-budget counts the training loop scales.
     """
 
     name: str
@@ -45,6 +52,7 @@ class Algorithm:
     envs: tuple[str, ...] = ()
     doc: str = ""
     independent_of: tuple[str, ...] = ()
+    defaults: Callable[..., Any] | None = None
 
     def check_env(self, env: str) -> None:
         """Raise a clear error if ``env`` is not one this algorithm is meant for."""
@@ -53,6 +61,12 @@ class Algorithm:
                 f"algorithm {self.name!r} does not support env {env!r}; "
                 f"expected one of {', '.join(self.envs)}"
             )
+
+    def default_config(self, env: str, budget: Any, overrides: dict[str, Any] | None) -> Any:
+        """The configuration ``--set`` overrides apply to: the task's preset or ``config()``."""
+        if self.defaults is None:
+            return self.config()
+        return self.defaults(env, budget, dict(overrides or {}))
 
 
 @dataclass(frozen=True)
@@ -76,10 +90,11 @@ def register_algorithm(
     envs: tuple[str, ...] = (),
     doc: str = "",
     independent_of: tuple[str, ...] = (),
+    defaults: Callable[..., Any] | None = None,
 ) -> Algorithm:
     algo = Algorithm(
         name=name, train=train, config=config, envs=tuple(envs), doc=doc,
-        independent_of=tuple(independent_of),
+        independent_of=tuple(independent_of), defaults=defaults,
     )  # fmt: skip
     ALGORITHMS[name] = algo
     return algo
@@ -104,6 +119,10 @@ ALGORITHM_MODULES: dict[str, str] = {
     "dime-gaussian": "vslbook.srl.dime",
     "crossq": "vslbook.srl.dime",
     "erl-pg": "vslbook.erl.pg",
+    "svsl": "vslbook.experiments.ch3_algorithms",
+    "hireps": "vslbook.experiments.ch3_algorithms",
+    "ladips": "vslbook.experiments.ch3_algorithms",
+    "ppo": "vslbook.experiments.ch3_algorithms",
 }
 
 
@@ -151,9 +170,10 @@ def get_figure(fig_id: str) -> Figure:
     return FIGURES[fig_id]
 
 
-def _convert(config_cls: type, field: Any, value: str) -> Any:
-    """Parse the command-line string ``value`` for ``field`` (its default or annotation)."""
-    default = getattr(config_cls(), field.name)
+def _convert(config_cls: type, field: Any, value: str, base: Any = None) -> Any:
+    """Parse the command-line string ``value`` for ``field`` (its value in ``base``, by
+    default ``config_cls()``, or its annotation)."""
+    default = getattr(config_cls() if base is None else base, field.name)
     annotation = str(field.type)
     if default is None or "None" in annotation:  # an optional field: "none" clears it
         if value.strip().lower() in ("none", "null"):
@@ -168,6 +188,13 @@ def _convert(config_cls: type, field: Any, value: str) -> Any:
         return value.lower() in ("true", "1")
     if default is None:
         return value
+    if isinstance(default, tuple):  # "0.1,0.2" or "(0.1, 0.2)": the element type of the base
+        kind = type(default[0]) if default else float
+        items = [v for v in value.strip().strip("()[]").split(",") if v.strip()]
+        try:
+            return tuple(kind(v.strip()) for v in items)
+        except ValueError:
+            raise ValueError(f"{field.name}={value}: expected comma-separated numbers") from None
     if isinstance(default, int):
         try:
             return int(value)
@@ -182,11 +209,15 @@ def _is_int(value: Any) -> bool:
     return isinstance(value, numbers.Integral) and not isinstance(value, bool)
 
 
-def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) -> Any:
+def config_from_overrides(
+    config_cls: type, overrides: dict[str, Any] | None, base: Any = None
+) -> Any:
     """Build ``config_cls`` with ``overrides``, converting strings to the field's type.
 
-    Strings (from ``--set key=value``) are parsed by the field's default or annotation;
-    ``none`` clears an optional field (e.g. ``fixed_alpha=none``).
+    Strings (from ``--set key=value``) are parsed by the field's value in ``base`` (an
+    instance of ``config_cls``, e.g. a task's preset; default ``config_cls()``) or its
+    annotation; ``none`` clears an optional field (e.g. ``fixed_alpha=none``); a tuple field
+    takes comma-separated numbers. The overrides replace ``base``'s fields.
 
     Raises:
         ValueError: for a field the config does not have (the message lists the valid ones)
@@ -204,7 +235,7 @@ def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) ->
         kind = str(fields[key].type)
         if isinstance(value, str) and kind != "str":
             try:
-                value = _convert(config_cls, fields[key], value)
+                value = _convert(config_cls, fields[key], value, base)
             except (TypeError, ValueError) as err:
                 if "expected an integer" in str(err):
                     raise ValueError(f"{err} (config field {key}: {kind})") from None
@@ -212,6 +243,10 @@ def config_from_overrides(config_cls: type, overrides: dict[str, Any] | None) ->
         elif kind in ("int", "int | None") and value is not None and not _is_int(value):
             raise ValueError(f"{key}={value!r}: expected an integer (config field {key}: {kind})")
         kwargs[key] = value
+    if base is not None:
+        if not isinstance(base, config_cls):
+            raise TypeError(f"base must be a {config_cls.__name__}, got {type(base).__name__}")
+        return dataclasses.replace(base, **kwargs)
     return config_cls(**kwargs)
 
 
@@ -224,4 +259,7 @@ def config_from_record(config_cls: type, record: dict[str, Any]) -> Any:
     import dataclasses
 
     names = {f.name for f in dataclasses.fields(config_cls)}
-    return config_cls(**{k: v for k, v in record.items() if k in names})
+    # JSON gives lists where the config had tuples
+    return config_cls(
+        **{k: tuple(v) if isinstance(v, list) else v for k, v in record.items() if k in names}
+    )

@@ -50,7 +50,8 @@ def run(
     """Train ``algo`` on ``env`` with ``seed`` at ``budget`` and return its run directory.
 
     Args:
-        overrides: hyper-parameters that differ from the algorithm's config defaults.
+        overrides: hyper-parameters that differ from the algorithm's config defaults (for
+            an algorithm with task presets, from the preset of ``env`` at ``budget``).
         stop_after: stop (without marking DONE) after this many iterations of *this call*;
             used to test that an interrupted run resumes exactly.
         reuse_stale: use an existing run directory made by other code (see the module
@@ -63,7 +64,8 @@ def run(
     spec = get_algorithm(algo)
     check_run_request(spec, env, seed)  # env id, algorithm support, seed: before any directory
     bud = get_budget(budget)
-    config = config_from_overrides(spec.config, overrides)
+    base = spec.default_config(env, bud, overrides)  # a task's preset at this budget, or config()
+    config = config_from_overrides(spec.config, overrides, base)
     record = {
         "algo": algo,
         "env": env,

@@ -76,6 +76,7 @@ __all__ = [
     "shared_task",
     "success_grid",
     "svsl_episodes",
+    "train_baseline",
 ]
 
 #: The three methods of Fig. 3.2a/b, in the thesis's order.
@@ -369,16 +370,47 @@ def _run_baseline(
     rd = open_run(root, record | extra)
     if rd.done:
         return rd.path
-    task = shared_task(task_name)
+    algo = train_baseline(rd, shared_task(task_name), method, config, seed, extra, workers=None)
+    rd.mark_done({"samples": algo.total_samples, "iterations": config.iterations})
+    return rd.path
+
+
+def train_baseline(
+    rd: RunDir,
+    task: Any,
+    method: str,
+    config: Any,
+    seed: int,
+    extra: dict[str, Any],
+    *,
+    until: int | None = None,
+    workers: int | None = 0,
+    progress: bool = False,
+) -> MixtureAlgorithm:
+    """Iterations of HiREPS or LaDiPS in ``rd``, resuming from its checkpoint.
+
+    Every ``extra["test_every"]`` iterations and at the end, θ ~ π(θ | c) is evaluated on
+    ``extra["test_contexts"]`` fixed contexts from p(c) (as :meth:`SVSL.test`); with
+    ``extra["entropy_draws"]`` the expected mixture entropy is estimated there too. Stops
+    after iteration ``until`` (default: ``config.iterations``), checkpointing there; the
+    caller marks the run done once ``algo.iterations_done == config.iterations``.
+    """
+    check_method(method)
     cls = hireps.HiREPS if method == "HiREPS" else ladips.LaDiPS
-    algo = cls(task, config, seed, workers=None)
+    algo = cls(task, config, seed, workers=workers)
     saved = rd.load_checkpoint()
     if saved is not None:
         algo.load_state_dict(saved["algo"])
     tests = task.sample_contexts(extra["test_contexts"], np.random.default_rng([seed, 1]))
-    contexts = entropy_contexts(task_name, extra)
+    contexts = entropy_contexts(task.name, extra) if "entropy_draws" in extra else None
     every = extra["test_every"]
-    for i in range(algo.iterations_done, config.iterations):
+    stop = config.iterations if until is None else min(until, config.iterations)
+    bar = None
+    if progress:
+        from tqdm.auto import tqdm
+
+        bar = tqdm(total=config.iterations, initial=algo.iterations_done, desc=method)
+    for i in range(algo.iterations_done, stop):
         metrics = algo.iteration()
         metrics["samples_iteration"] = metrics.pop("samples")
         metrics["samples"] = algo.total_samples  # executed episodes so far
@@ -386,19 +418,22 @@ def _run_baseline(
         if it % every == 0 or it == config.iterations:
             # θ ~ π(θ | c) on the fixed test contexts, as SVSL.test
             th, _ = algo.sample(tests, np.random.default_rng([seed, 2, it]))
-            out = task.evaluate(th, tests, workers=None)
+            out = task.evaluate(th, tests, workers=workers)
             metrics["test_return"] = float(np.mean(out.returns))
             metrics["test_success"] = float(np.mean(out.success))
-            if _entropy_due(it, every, config.iterations, extra):
+            if contexts is not None and _entropy_due(it, every, config.iterations, extra):
                 rng = np.random.default_rng([seed, 3, it])
                 metrics["expected_entropy"] = expected_entropy(
                     mixture_of(algo), contexts, extra["entropy_draws"], rng
                 )
         rd.log(it, **metrics)
-        if it % 25 == 0 or it == config.iterations:
+        if bar is not None:
+            bar.update(1)
+        if it % 25 == 0 or it == stop:
             rd.save_checkpoint({"algo": algo.state_dict()})
-    rd.mark_done({"samples": algo.total_samples, "iterations": config.iterations})
-    return rd.path
+    if bar is not None:
+        bar.close()
+    return algo
 
 
 def _config_from(cls: type, cfg: dict[str, Any]) -> Any:
