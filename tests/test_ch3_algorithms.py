@@ -141,3 +141,16 @@ def test_reacher_run_is_the_notebooks_and_tested_on_ppos_goals(tmp_path):
     ours, theirs = _rows(rd.path), _rows(notebook)
     assert [r.get("test_return") for r in ours] == [r.get("test_return") for r in theirs]
     assert ours[-1]["test_return"] is not None and rd.config["reward"] == "3.8"
+
+
+def test_sweep_checks_each_env_against_its_preset(tmp_path):
+    from vslbook.sweep import sweep
+
+    paths = sweep("hireps", [PLANAR], [0], grid={"eps": ["0.5"]}, budget="smoke",
+                  root=tmp_path, executor="debug")  # fmt: skip
+    assert len(paths) == 1
+    with pytest.raises(ValueError, match=r"needs reward="):
+        sweep("svsl", [REACHER], [0], budget="smoke", root=tmp_path, executor="debug")
+    with pytest.raises(ValueError, match=r"has no field 'nope'"):
+        sweep("svsl", [PLANAR], [0], grid={"nope": ["1"]}, budget="smoke", root=tmp_path,
+              executor="debug")  # fmt: skip

@@ -104,12 +104,12 @@ def sweep(
     spec = get_algorithm(algo)
     bud = get_budget(budget)
     points = expand_grid(grid)
-    for point in points:  # fail before submitting anything
-        config_from_overrides(spec.config, point)
     envs = [envs] if isinstance(envs, str) else list(envs)
     seed_list = list(range(bud.seeds) if seeds is None else seeds)
-    for env in envs:  # env ids and seeds too: a bad one is an error here, not in a job
+    for env in envs:  # env ids, configs and seeds: a bad one is an error here, not in a job
         check_run_request(spec, env, 0)
+        for point in points:
+            config_from_overrides(spec.config, point, spec.default_config(env, bud, point))
     seed_list = [check_seed(s) for s in seed_list]
     jobs_args = [
         (algo, env, int(s), bud.name, str(Path(root).resolve()), point)
