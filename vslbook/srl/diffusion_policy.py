@@ -245,8 +245,14 @@ class DiffusionPolicy(nn.Module):
         """∇ log N(x; 0, σ0² I) = -x / σ0²."""
         return -x / self.config.sigma0**2
 
-    def forward(self, obs: Tensor, deterministic: bool = False) -> PolicySample:
-        return self.sample(obs, deterministic)
+    def forward(
+        self, obs: Tensor, deterministic: bool = False, noise: Tensor | None = None
+    ) -> PolicySample:
+        return self.sample(obs, deterministic, noise=noise)
+
+    def noise_shape(self, batch: int) -> tuple[int, int, int]:
+        """Shape of the ``noise`` :meth:`sample` takes: x_N's draw, then ε_N, ..., ε_1."""
+        return (self.config.n_steps + 1, batch, self.act_dim)
 
     def sample(
         self,
@@ -254,11 +260,15 @@ class DiffusionPolicy(nn.Module):
         deterministic: bool = False,
         generator: torch.Generator | None = None,
         return_trajectory: bool = False,
+        noise: Tensor | None = None,
     ) -> PolicySample:
         """Run the chain for a batch of states ``obs`` (B, obs_dim), reparameterised throughout.
 
         ``deterministic=True`` starts at x_N = 0 and sets every ε_n = 0 (the noise-free path);
-        its costs are then not an entropy estimate. ``generator`` seeds the noise.
+        its costs are then not an entropy estimate. ``generator`` seeds the noise; or
+        ``noise`` (:meth:`noise_shape`) gives the standard normal draws themselves, in the
+        order they would be drawn (a run over many seeds draws each seed's from its own
+        stream, :mod:`vslbook.srl.seed_axis`).
         """
         if obs.ndim != 2 or obs.shape[1] != self.obs_dim:  # shapes only: no host sync
             raise ValueError(
@@ -266,10 +276,17 @@ class DiffusionPolicy(nn.Module):
                 f"got {tuple(obs.shape)}"
             )
         c, batch = self.config, obs.shape[0]
+        if noise is not None and tuple(noise.shape) != self.noise_shape(batch):
+            raise ValueError(
+                f"noise must have shape {self.noise_shape(batch)}, got {tuple(noise.shape)}"
+            )
+        draws = iter(() if noise is None else noise.unbind(0))
 
-        def noise() -> Tensor:
+        def noise_draw() -> Tensor:
             if deterministic:
                 return obs.new_zeros(batch, self.act_dim)
+            if noise is not None:
+                return next(draws)
             return torch.randn(
                 batch, self.act_dim, generator=generator, device=obs.device, dtype=obs.dtype
             )
@@ -280,7 +297,7 @@ class DiffusionPolicy(nn.Module):
         noising_emb = None if self.noising_net is None else self.noising_net.embed_steps(steps - 1)
         etas = self.step_sizes
 
-        x = c.sigma0 * noise()  # x_N ~ N(0, σ0² I)
+        x = c.sigma0 * noise_draw()  # x_N ~ N(0, σ0² I)
         var0 = c.sigma0**2
         terminal_cost = -0.5 * (x**2 / var0 + math.log(2.0 * math.pi * var0)).sum(dim=-1)
         log_ratio = obs.new_zeros(batch)
@@ -288,7 +305,7 @@ class DiffusionPolicy(nn.Module):
         for k in range(n_steps):
             eta = etas[k]
             drift = self.prior_score(x) + self.score_net(x, score_emb[k], obs)
-            eps = noise()
+            eps = noise_draw()
             x_next = x + eta * drift + torch.sqrt(2.0 * eta) * eps  # Eq. 5.12
             # log π_{n-1|n}(x_{n-1}|x_n), written through ε so it is exact under reparam.
             log_generative = -0.5 * (eps**2 + torch.log(4.0 * math.pi * eta)).sum(dim=-1)

@@ -205,11 +205,16 @@ class UpdateStats(NamedTuple):
     running_cost: Tensor | None = None
 
 
-def critic_update(agent: Agent, batch: Batch) -> UpdateStats:
-    """One step on the critic loss (Algorithm 4, l. 7; Eq. 5.21 / 5.24, CrossQ joint batch)."""
+def critic_loss(agent: Any, batch: Batch, noise: Tensor | None = None) -> tuple[Tensor, Tensor]:
+    """The critic loss of one batch (Eq. 5.21 / 5.24, CrossQ joint batch) and the mean Q.
+
+    ``agent`` is an :class:`Agent` or anything with its ``cfg``, ``policy``, ``critic``,
+    ``critic_target``, ``support`` and ``alpha`` (:mod:`vslbook.srl.seed_axis` passes one
+    seed's networks); ``noise`` is the policy's draws for a' ~ π(·|s') (default: fresh).
+    """
     cfg = agent.cfg
     with torch.no_grad():
-        next_sample = agent.policy.sample(batch.next_obs)  # a' ~ π(·|s') and its costs
+        next_sample = agent.policy.sample(batch.next_obs, noise=noise)  # a' ~ π(·|s'), costs
         soft_bonus = -agent.alpha * next_sample.cost  # α ℓ(a', s'), ℓ the entropy bound
     if agent.critic_target is None:  # CrossQ: one pass on [(s, a); (s', a')], s' half detached
         out, out_next = agent.critic.joint_forward(
@@ -234,15 +239,37 @@ def critic_update(agent: Agent, batch: Batch) -> UpdateStats:
             not_done = 1.0 - batch.terminated
             target = batch.reward + cfg.gamma * not_done * (combine_q(agent, out_next) + soft_bonus)
         loss = 0.5 * ((out - target) ** 2).mean(dim=-1).sum()
+    with torch.no_grad():
+        q_mean = q_values(agent, out.detach()).mean()
+    return loss, q_mean
 
+
+def critic_update(agent: Agent, batch: Batch) -> UpdateStats:
+    """One step on the critic loss (Algorithm 4, l. 7; Eq. 5.21 / 5.24, CrossQ joint batch)."""
+    loss, q_mean = critic_loss(agent, batch)
     agent.critic_opt.zero_grad(set_to_none=True)
     loss.backward()
     agent.critic_opt.step()
     if agent.critic_target is not None:
-        polyak_update(agent.critic_target, agent.critic, cfg.tau)
-    with torch.no_grad():
-        q_mean = q_values(agent, out.detach()).mean()
+        polyak_update(agent.critic_target, agent.critic, agent.cfg.tau)
     return UpdateStats(loss.detach(), q_mean)
+
+
+def actor_loss(agent: Any, obs: Tensor, noise: Tensor | None = None) -> tuple[Tensor, Any]:
+    """Eq. 5.27, mean[α (running + terminal cost) - ½(Q1 + Q2)(s, a)], and the sample.
+
+    The caller puts the critics in eval mode and keeps gradients from their weights."""
+    sample = agent.policy.sample(obs, noise=noise)  # reparameterised through the chain
+    q = combine_q(agent, q_values(agent, agent.critic(obs, sample.action)))
+    return (agent.alpha * sample.cost - q).mean(), sample  # log Z does not depend on θ
+
+
+def clean_actor_grads(params: list[Tensor], clip: float) -> None:
+    """Drop NaN gradient entries, then clip each element to ±``clip`` (if > 0)."""
+    for p in params:
+        torch.nan_to_num_(p.grad, nan=0.0, posinf=math.inf, neginf=-math.inf)
+    if clip > 0:
+        nn.utils.clip_grad_value_(params, clip)
 
 
 def actor_update(agent: Agent, obs: Tensor) -> UpdateStats:
@@ -255,19 +282,14 @@ def actor_update(agent: Agent, obs: Tensor) -> UpdateStats:
     critic.eval()
     critic.requires_grad_(False)
     try:
-        sample = agent.policy.sample(obs)  # reparameterised through the chain
-        q = combine_q(agent, q_values(agent, critic(obs, sample.action)))
-        loss = (agent.alpha * sample.cost - q).mean()  # Eq. 5.27 (log Z does not depend on θ)
+        loss, sample = actor_loss(agent, obs)
         agent.actor_opt.zero_grad(set_to_none=True)
         loss.backward()
     finally:
         critic.requires_grad_(True)
         critic.train()
     params = [p for p in agent.policy.parameters() if p.grad is not None]
-    for p in params:  # drop NaN gradient entries
-        torch.nan_to_num_(p.grad, nan=0.0, posinf=math.inf, neginf=-math.inf)
-    if cfg.actor_grad_clip > 0:  # then clip each element to ±actor_grad_clip (±1)
-        nn.utils.clip_grad_value_(params, cfg.actor_grad_clip)
+    clean_actor_grads(params, cfg.actor_grad_clip)  # NaN entries dropped, each element ±1
     agent.actor_opt.step()
     return UpdateStats(
         loss.detach(), sample.entropy_bound.detach().mean(), sample.running_cost.detach()

@@ -58,16 +58,25 @@ class GaussianPolicy(nn.Module):
         h = self.trunk(obs)
         return self.mean(h), self.log_std(h).clamp(*self.log_std_bounds)
 
-    def forward(self, obs: Tensor, deterministic: bool = False) -> PolicySample:
-        return self.sample(obs, deterministic)
+    def forward(
+        self, obs: Tensor, deterministic: bool = False, noise: Tensor | None = None
+    ) -> PolicySample:
+        return self.sample(obs, deterministic, noise=noise)
+
+    def noise_shape(self, batch: int) -> tuple[int, int]:
+        """Shape of the ``noise`` (ε) :meth:`sample` takes."""
+        return (batch, self.act_dim)
 
     def sample(
         self,
         obs: Tensor,
         deterministic: bool = False,
         generator: torch.Generator | None = None,
+        noise: Tensor | None = None,
     ) -> PolicySample:
-        """Reparameterised a = tanh(μ + σ ε); ``deterministic`` uses ε = 0 (a = tanh μ)."""
+        """Reparameterised a = tanh(μ + σ ε); ``deterministic`` uses ε = 0 (a = tanh μ).
+
+        ``generator`` seeds ε, or ``noise`` (:meth:`noise_shape`) is ε itself."""
         obs_dim = self.trunk[0].in_features
         if obs.ndim != 2 or obs.shape[1] != obs_dim:  # shapes only: no host sync
             raise ValueError(
@@ -77,6 +86,12 @@ class GaussianPolicy(nn.Module):
         mean, log_std = self.distribution(obs)
         if deterministic:
             eps = torch.zeros_like(mean)
+        elif noise is not None:
+            if tuple(noise.shape) != tuple(mean.shape):
+                raise ValueError(
+                    f"noise must have shape {tuple(mean.shape)}, got {tuple(noise.shape)}"
+                )
+            eps = noise
         else:
             eps = torch.randn(mean.shape, generator=generator, device=mean.device,
                               dtype=mean.dtype)
