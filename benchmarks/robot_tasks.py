@@ -63,7 +63,9 @@ def _model_of(task) -> mujoco.MjModel | None:
 _TIMING = {
     "table-tennis-4d": {0: 1.0, 1: 0.3},  # τ, delay
     "table-tennis-hard": {0: 1.0, 1: 0.3},
-    "beer-pong": {0: 0.6},  # movement duration in seconds
+    "table-tennis-ch3": {0: 1.0},  # movement duration in seconds
+    "beer-pong": {0: 0.6},
+    "mini-golf": {0: 1.0},  # τ
 }
 
 

@@ -22,6 +22,19 @@ CTX = np.array([0.3, -0.5, 0.44, 0.55])  # obstacle far left, goal gap centred a
 # A ball placed just touching the club head's lower edge (the robot holds q0): its first
 # contact is a hit; pushed by hand towards (aim, -0.7) at 1.6 m/s.
 BALL_AT_CLUB = np.array([0.44, 0.6095, 0.0063])
+# A θ whose swing sends the ball through the goal gap. Found by a cross-entropy search
+# (population 40, 8 elites, θ ~ N([τ 1.0, w 0], diag([0.3, 1.5, ..., 1.5]²)), numpy seed 0)
+# for the ball at x = 0.44 and the moving obstacle at (0.3, -0.5), scoring a hit whose ball
+# reaches y = -0.66 at x ∈ [0.27, 0.58]: the ball's path up to the goal line does not depend
+# on x_goal, so x_goal was then put where the ball crosses the line (0.5233, rounded to
+# 0.525). The first population of 40 already held it. Rounded to 6 decimals.
+CTX_PASS = np.array([0.3, -0.5, 0.44, 0.525])
+THETA_PASS = np.array([
+    1.42624, -0.263785, -0.558085, -0.093237, -0.894921, -1.035395, -0.961823, 1.061933,
+    1.530684, -1.582639, 0.358842, 1.182311, -1.622628, -0.75385, -1.557096, -1.936543,
+    0.152794, -1.104199, 0.946694, -0.044133, 0.618941, -0.438424, -0.952496, -0.13601,
+    -0.007494, -1.058783, 0.639893, 1.119892, 0.237124,
+])  # fmt: skip
 Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 Q_MIN = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
 
@@ -266,3 +279,25 @@ def test_one_step_env_passes_check_env() -> None:
     th[0] = 2.0
     _, r, term, trunc, info = env.step(th)
     assert term and not trunc and not info["executed"] and r == pytest.approx(-23.0)
+
+
+def test_found_theta_succeeds(task: MiniGolf) -> None:
+    r = task.evaluate(THETA_PASS, CTX_PASS, workers=0)
+    assert r.executed[0] and r.success[0]
+    assert r.info["hit"][0] == 1.0 and r.info["passed"][0] == 1.0
+    # the ball went through the gap, close to its centre (x_goal, -0.7, 0.005) ...
+    assert r.info["min_ball_goal_dist"][0] < 0.028 and r.info["min_ball_y"][0] < -0.75
+    # ... and the return is the passed-case 6 plus the (negative) step costs
+    assert 2.0 < r.returns[0] < 6.0
+    # the same swing with the gap moved 5 cm aside hits a goal wall
+    for x_goal in (CTX_PASS[3] - 0.05, CTX_PASS[3] + 0.05):
+        miss = task.evaluate(THETA_PASS, [*CTX_PASS[:3], x_goal], workers=0)
+        assert miss.info["hit"][0] == 1.0 and not miss.success[0]
+
+
+def test_found_theta_survives_a_small_perturbation(task: MiniGolf) -> None:
+    rng = np.random.default_rng(0)
+    th = THETA_PASS + 1e-3 * rng.standard_normal((2, 29))
+    r = task.evaluate(th, CTX_PASS, workers=0)
+    assert r.executed.all() and np.all(np.isfinite(r.returns))
+    assert r.success.all()  # the pass is not a knife-edge of θ

@@ -109,8 +109,9 @@ json.dump(out, sys.stdout)
 @pytest.mark.slow
 def test_pictures_render_and_follow_the_context():
     env = {**os.environ, "MUJOCO_GL": "osmesa", "OMP_NUM_THREADS": "1"}
-    proc = subprocess.run([sys.executable, "-c", _RENDER], capture_output=True, text=True,
-                          env=env, timeout=300)
+    proc = subprocess.run(
+        [sys.executable, "-c", _RENDER], capture_output=True, text=True, env=env, timeout=300
+    )
     assert proc.returncode == 0, proc.stderr[-2000:]
     imgs = {k: np.array(v, dtype=np.uint8) for k, v in json.loads(proc.stdout).items()}
     a, b = imgs["a"], imgs["b"]
@@ -121,3 +122,73 @@ def test_pictures_render_and_follow_the_context():
     assert 0 < changed.mean() < 0.05
     rows, cols = np.nonzero(changed)
     assert cols.max() - cols.min() > 40, "the target should move across the picture"
+
+
+# -- projection of world points onto the picture -----------------------------------------------
+def test_project_by_hand():
+    from vslbook.envs.robot.render import Camera, project
+
+    # azimuth 90, elevation 0: the camera looks along +y from (0, -2, 0); right is +x, up +z
+    cam = Camera((0.0, 0.0, 0.0), 2.0, 90.0, 0.0)
+    pts = np.array([[0.0, 0.0, 0.0], [0.5, 0.0, 0.25], [0.5, 2.0, 0.0], [0.0, -3.0, 0.0]])
+    px = project(cam, pts, 200, 100, fovy=90.0)
+    f = 50.0  # (h/2) / tan(45°)
+    np.testing.assert_allclose(px[0], [99.5, 49.5])  # the look-at point: the picture's centre
+    np.testing.assert_allclose(px[1], [99.5 + f * 0.5 / 2, 49.5 - f * 0.25 / 2])
+    np.testing.assert_allclose(px[2], [99.5 + f * 0.5 / 4, 49.5])  # twice as deep: half the shift
+    assert np.isnan(px[3]).all()  # behind the camera
+    # looking straight down (elevation -90 would be degenerate; -89°): +x goes up the picture
+    # for azimuth 0, i.e. to smaller rows
+    top = Camera((0.0, 0.0, 0.0), 1.0, 0.0, -89.0)
+    a, b = project(top, np.array([[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]]), 100, 100, fovy=45.0)
+    assert b[1] < a[1] and abs(b[0] - a[0]) < 1e-9
+    with pytest.raises(ValueError, match=r"shape \(n, 3\)"):
+        project(cam, np.zeros((2, 2)), 10, 10, fovy=45.0)
+    with pytest.raises(ValueError, match="fovy"):
+        project(cam, pts, 10, 10, fovy=0.0)
+    with pytest.raises(ValueError, match="width"):
+        project(cam, pts, 0, 10, fovy=45.0)
+
+
+_MARKERS = r"""
+import json, sys
+import mujoco
+import numpy as np
+from vslbook.envs.robot.render import Camera, project, render_data
+spheres = {"red": ([0.3, -0.2, 0.1], "1 0 0 1"), "green": ([-0.25, 0.15, 0.3], "0 1 0 1"),
+           "blue": ([0.05, 0.35, -0.15], "0 0 1 1")}
+geoms = "".join(
+    f'<geom type="sphere" size="0.012" pos="{p[0]} {p[1]} {p[2]}" rgba="{c}" material="glow"/>'
+    for p, c in spheres.values())
+xml = f'''<mujoco><visual><global fovy="35"/></visual>
+<asset><material name="glow" emission="1" specular="0"/></asset>
+<worldbody>{geoms}</worldbody></mujoco>'''
+model = mujoco.MjModel.from_xml_string(xml)
+data = mujoco.MjData(model)
+mujoco.mj_forward(model, data)
+cam = Camera((0.02, 0.05, 0.03), 1.4, 130.0, -30.0)
+img = render_data(model, data, cam, width=160, height=120)
+px = project(cam, np.array([p for p, _ in spheres.values()]), 160, 120,
+             fovy=float(model.vis.global_.fovy))
+json.dump({"img": img.tolist(), "px": px.tolist(), "names": list(spheres)}, sys.stdout)
+"""
+
+
+@pytest.mark.slow
+def test_project_matches_rendered_markers():
+    """Three small glowing spheres in an otherwise empty scene: the centroid of each one's
+    pixels in MuJoCo's own picture lies where project() puts its centre."""
+    env = {**os.environ, "MUJOCO_GL": "osmesa", "OMP_NUM_THREADS": "1"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _MARKERS], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    out = json.loads(proc.stdout)
+    img = np.array(out["img"], dtype=int)
+    for k, (name, want) in enumerate(zip(out["names"], out["px"], strict=True)):
+        others = [c for c in range(3) if c != k]
+        mask = (img[..., k] > 120) & (img[..., others].max(axis=-1) < 60)
+        assert 3 <= mask.sum() < 100, f"{name}: {mask.sum()} pixels"
+        rows, cols = np.nonzero(mask)
+        centroid = np.array([cols.mean(), rows.mean()])
+        assert np.linalg.norm(centroid - want) < 1.0, (name, centroid, want)

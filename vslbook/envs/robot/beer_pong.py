@@ -63,6 +63,10 @@ limits j_min = [−2.6, −1.985, −2.8, −0.9, −4.55, −1.5707, −2.7], j
 3.14159, 1.25, 1.5707, 2.7] (the model's ranges): −30. A context outside the box gets
 :meth:`BeerPong.context_penalty` = −30 − d_c² (d_c: Euclidean distance to the box).
 
+**Path** (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball``, the ball's position
+at 0, dt, ..., T (the rows of ``ball_path``, recorded by the loop; an unstable episode stops
+at its last step).
+
 **Success**: the ball is in the cup at the end. Info: ``in_cup``, ``table_contact``,
 ``min_dist_top`` (min_t ‖p_c,top − p_b,t‖), ``final_dist_bottom`` (‖p_c,bottom − p_b,T‖),
 ``release_time`` (s), ``duration`` (l as given), ``torque_cost`` (τ̄). A rejected θ reports
@@ -169,6 +173,7 @@ class BeerPong(EpisodicTask):
         "duration", "torque_cost",
     )  # fmt: skip
     has_success: ClassVar[bool] = True
+    path_names: ClassVar[tuple[str, ...]] = ("ball",)
 
     def __init__(
         self, extra_steps: int = EXTRA_STEPS, weights_scale: float = WEIGHTS_SCALE, **kwargs: Any
@@ -284,6 +289,7 @@ class BeerPong(EpisodicTask):
         site_type, hand = mujoco.mjtObj.mjOBJ_SITE, self._hand
         lo, hi = self._table_lo, self._table_hi
         mul, sub = np.multiply, np.subtract
+        path = self._recorder
         for k in range(n_total):
             step1(m, d)
             if k <= n:  # ball held at the hand up to the release time n·dt
@@ -299,6 +305,8 @@ class BeerPong(EpisodicTask):
             ):
                 table_contact = self.ball_contacts()[1]
             balls[k] = ball_q
+            if path is not None:
+                path(ball=ball_q)
             # u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias, with ff = K_p q_d + K_d q̇_d
             u = torques[k]
             sub(ff[k], mul(P_GAINS, q, out=tmp), out=u)
@@ -314,6 +322,8 @@ class BeerPong(EpisodicTask):
             return Episode(UNSTABLE_PENALTY, False, True, info)
         mujoco.mj_forward(m, d)  # contacts of the final state
         balls[n_total] = ball_q
+        if path is not None:
+            path(ball=ball_q)
         self.ball_path = balls  # the ball's positions at 0, dt, ..., T (Fig. 3.2g)
         self.torque_path = torques  # the applied joint torques u of every step
         in_cup, last_table = self.ball_contacts()

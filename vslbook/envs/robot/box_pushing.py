@@ -51,6 +51,9 @@ R_goal = ‖p − p_goal‖ and R_rotation = (1/π) arccos|r · r_goal|. The ret
 rod-rotation cost below π/4 tilt (the thesis's clip at 0.25 costs 0.25 per step there) and
 adds −50‖q̇_T‖ at the end.
 
+Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``box`` (the box body's centre)
+and ``rod_tip`` at the start and after every control step, the positions the reward reads.
+
 Success: at the end ‖p − p_goal‖ < 0.05 m and the rotation error 2 arccos|r · r_goal| <
 0.5 rad. Info: ``pos_error``, ``rot_error`` (at the end), ``success`` (0/1).
 
@@ -155,9 +158,7 @@ def unstable(d: mujoco.MjData) -> bool:
     """Whether the simulation broke down: MuJoCo warned of a bad acceleration, velocity or
     position (it then resets the state to the model's default silently), or the state is
     not finite."""
-    return any(d.warning[w].number > 0 for w in _BAD_STATE) or not bool(
-        np.all(np.isfinite(d.qpos))
-    )
+    return any(d.warning[w].number > 0 for w in _BAD_STATE) or not bool(np.all(np.isfinite(d.qpos)))
 
 
 def is_success(pos_error: float, rot_error: float) -> bool:
@@ -181,6 +182,7 @@ class BoxPushingObstacle(EpisodicTask):
     n_params = 28
     info_keys = ("pos_error", "rot_error", "success")
     has_success = True
+    path_names = ("box", "rod_tip")
 
     def __init__(self, goal: str = "disabled", joint_limit_check: bool = True) -> None:
         if goal not in ("disabled", "learned"):
@@ -276,6 +278,9 @@ class BoxPushingObstacle(EpisodicTask):
         m, d = self.model, self.data
         gpos, gquat = self.reset(context)
         ret, pos_err, rot_err = 0.0, math.nan, math.nan
+        path = self._recorder
+        if path is not None:
+            path(box=d.xpos[self._box_body], rod_tip=d.site_xpos[self._rod_tip])
         for t in range(HORIZON):
             a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
             torque = apply_torque(m, d, a)
@@ -286,6 +291,8 @@ class BoxPushingObstacle(EpisodicTask):
                 break
             r, pos_err, rot_err = self.state_reward(gpos, gquat, torque, t == HORIZON - 1)
             ret += r
+            if path is not None:
+                path(box=d.xpos[self._box_body], rod_tip=d.site_xpos[self._rod_tip])
         success = is_success(pos_err, rot_err)
         info = {"pos_error": pos_err, "rot_error": rot_err, "success": float(success)}
         return Episode(float(ret), success, True, info)

@@ -58,6 +58,10 @@ Reward (non-Markovian, sparse; the return is the sum of the step rewards, B.4.2)
     Positions and contacts are read as MuJoCo left them after the 4 physics steps (computed
     at the start of the last physics step, as gymnasium's MuJoCo environments read them).
 
+Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`)
+    ``foot`` (the ``foot_site``) and ``torso`` (the torso's centre of mass, whose height is
+    h) at the start and after every control step, as the reward reads them.
+
 Success and validity
     No success flag (``has_success = False``); ``info`` reports ``max_height``,
     ``goal_distance`` (‖p_foot,T − p_goal‖), ``contact_distance`` (NaN if the foot never
@@ -187,6 +191,7 @@ class HopperJump(EpisodicTask):
     n_params = SPEC.n_params
     info_keys = ("max_height", "goal_distance", "contact_distance", "healthy")
     has_success = False
+    path_names = ("foot", "torso")
     spec = SPEC
 
     def __init__(self, **kwargs: Any) -> None:
@@ -249,6 +254,9 @@ class HopperJump(EpisodicTask):
         phase = 0  # 0: not yet touched, 1: touching, 2: left the floor, 3: touched again
         feedforward = P_GAIN * q_d + D_GAIN * dq_d
         feedback = np.empty(3)
+        path = self._recorder
+        if path is not None:
+            path(foot=site, torso=torso)
         for t in range(N_STEPS):
             # u = clip(P (q_d - q) + D (dq_d - dq), -1, 1), without temporaries
             u = actions[t]
@@ -262,6 +270,8 @@ class HopperJump(EpisodicTask):
             mujoco.mj_step(m, d, nstep=FRAME_SKIP)
             heights[t] = torso[2]
             foot[t] = site
+            if path is not None:
+                path(foot=site, torso=torso)
             if phase < 3:  # after the re-contact the contacts no longer matter
                 touch = self._foot_contact()
                 contacts[t] = touch

@@ -61,6 +61,10 @@ weighed by 0.5 with an offset of +0.5 (``reward="code"`` gives it). Unstable sim
 (MuJoCo's bad-acceleration warning or a non-finite state): that step gives −50 (the code's
 value) instead of its reward and the episode ends.
 
+Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball`` (centre) and ``club``
+(the ``rod_tip`` site at the club head) at the start and after every control step, read as
+the reward reads them.
+
 Success: the ball passed the goal after the hit (the thesis's fourth case). Info: ``hit``,
 ``passed`` (0/1), ``min_rod_ball_dist``, ``min_ball_goal_dist``, ``min_ball_y``,
 ``unstable`` (0/1), ``steps`` (control steps simulated); NaN for invalid θ.
@@ -215,6 +219,7 @@ class MiniGolf(EpisodicTask):
         "steps",
     )  # fmt: skip
     has_success: ClassVar[bool] = True
+    path_names: ClassVar[tuple[str, ...]] = ("ball", "club")
     mp: ClassVar[ProDMPSpec] = SPEC
 
     def __init__(self, reward: str = "thesis", joint_limit_check: bool = True) -> None:
@@ -293,6 +298,9 @@ class MiniGolf(EpisodicTask):
         bad, warnings = int(mujoco.mjtWarning.mjWARN_BADQACC), d.warning.number
         hit = passed = unstable = False
         i = t = 0
+        path = self._recorder
+        if path is not None:
+            path(ball=start_ball, club=start_tip)
         for t in range(HORIZON):
             a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
             torques[t] = ACTION_SCALE * np.clip(a, -1.0, 1.0)
@@ -311,6 +319,8 @@ class MiniGolf(EpisodicTask):
                 i += 1
             if unstable:
                 break
+            if path is not None:
+                path(ball=d.xpos[self._ball_body], club=d.site_xpos[self._rod_tip])
         self.physics_steps += i + int(unstable)  # the unstable substep was taken as well
         if i == 0:  # unstable in the very first substep: the start state is all there is
             ball[0], tip[0], i = start_ball, start_tip, 1

@@ -208,6 +208,14 @@ class PlanarReacherTask(EpisodicTask):
         }
 
     # -- episodes -----------------------------------------------------------------------
+    def path(self, theta: Any, context: Any) -> dict[str, np.ndarray]:
+        """Not available: an episode is one pose, not a movement (the arm's link end points
+        are :func:`link_points`)."""
+        raise NotImplementedError(
+            f"{self.name}: records no path over an episode (the task is kinematic: an episode "
+            "is one pose; link_points(theta) gives the arm)"
+        )
+
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         return self.episodes(np.asarray(theta)[None], np.asarray(context)[None])[0]
 

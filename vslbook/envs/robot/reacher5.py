@@ -6,6 +6,7 @@ of 0.1 m and a fingertip 0.11 m beyond the last joint (reach 0.51 m), five motor
 200 and ctrl ∈ [−1, 1], RK4 with timestep 0.01 s, no contacts. Frame skip 2 → control step
 dt = 0.02 s; an episode has T = 200 control steps (4 s). The goal is the slide-jointed
 ``target`` body (qpos[5:7]); the tip is computed by forward kinematics (:func:`tip_position`).
+``path(theta, context)`` gives the fingertip's world position over an episode.
 
 **Controller** (both tasks, CH3_CH4_FACTS §1): the movement primitive gives ``(q_d, q̇_d)``
 on the grid ``0, dt, ..., T·dt``; at control step t = 0..T−1 the command is
@@ -248,6 +249,7 @@ class _ReacherTask(EpisodicTask):
     context_names: ClassVar[tuple[str, ...]] = ("goal_x", "goal_y")
     info_keys: ClassVar[tuple[str, ...]] = ("tip_distance", "velocity_cost", "action_cost")
     has_success: ClassVar[bool] = False
+    path_names: ClassVar[tuple[str, ...]] = ("fingertip",)
     q0: ClassVar[np.ndarray] = Q0_RIGHT
 
     def __init__(self, **kwargs: Any) -> None:
@@ -295,6 +297,23 @@ class _ReacherTask(EpisodicTask):
 
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         return self.episodes(np.asarray(theta)[None], np.asarray(context)[None])[0]
+
+    def path(self, theta: Any, context: Any) -> dict[str, np.ndarray]:
+        """``fingertip``: its world position at the start and after every control step,
+        ``(T + 1, 3)``: the joint positions of the PD rollout :meth:`evaluate` runs, put
+        through MuJoCo's forward kinematics (see the base class)."""
+        c = self.one_context(context)
+        _, qs, _ = self.rollout(theta, c)
+        m = self.sim.model
+        d = mujoco.MjData(m)
+        d.qpos[N_LINKS:] = c
+        tip = m.body("fingertip").id
+        out = np.empty((len(qs), 3))
+        for t, q in enumerate(qs):
+            d.qpos[:N_LINKS] = q
+            mujoco.mj_kinematics(m, d)
+            out[t] = d.xpos[tip]
+        return {"fingertip": out}
 
     def scene(self, context: Any) -> tuple[mujoco.MjModel, mujoco.MjData]:
         """The arm at its start, the target at the goal ``context`` (see the base class)."""

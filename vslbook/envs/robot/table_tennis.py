@@ -61,6 +61,11 @@ to bat centre over all sub-steps), g = goal:
 Success: the returned ball lands on the table at x < 0 (opponent's side) and
 ‖landing_xy - goal‖ < 0.2.
 
+Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball`` (ball centre) and
+``racket`` (bat centre) at the start and after every control step, as the reward reads them
+(``xpos`` after a physics step); the last row is the sub-step that ended the episode, so
+for a landing the ball's last point is the landing point of ``info``.
+
 Other places where the thesis was followed over the code or had to be interpreted
     * Goal y ∈ [-0.6, 0.6] as in B.4.1.1 (the code samples ±0.65).
     * The episode stops at the sub-step of the terminating contact (the code finishes the
@@ -171,6 +176,7 @@ class TableTennis4D(EpisodicTask):
         "unstable", "steps",
     )  # fmt: skip
     has_success: ClassVar[bool] = True
+    path_names: ClassVar[tuple[str, ...]] = ("ball", "racket")
     spec: ClassVar[ProDMPSpec] = SPEC
 
     def __init__(self, floor_counts_as_landing: bool = False, **kwargs: Any) -> None:
@@ -301,7 +307,9 @@ class TableTennis4D(EpisodicTask):
         landing: np.ndarray | None = None
         landed_on_table = False
         i = k = 0
-        record = self._record
+        record, path = self._record, self._recorder
+        if path is not None:
+            path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
         for k in range(MAX_STEPS):
             ctrl[:] = feedforward[k] - KP * qpos[:7] - KD * qvel[:7]
             for _ in range(FRAME_SKIP):
@@ -327,6 +335,8 @@ class TableTennis4D(EpisodicTask):
                     break
             if warnings[bad] > 0:  # MuJoCo reset the state after a divergence
                 unstable = True
+            elif path is not None:
+                path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
             if done or unstable:
                 break
         self.sim_steps += i

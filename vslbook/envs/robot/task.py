@@ -13,6 +13,11 @@ input checks with clear errors, and batched evaluation (:meth:`EpisodicTask.eval
 through a pool of worker processes, each holding its own simulator. Episodes are
 deterministic given (θ, c), so a batch gives the same numbers with any number of workers.
 
+:meth:`EpisodicTask.path` replays one episode and returns the world positions of the
+task's moving points (the ball, the box, the fingertip, ...) over it, recorded by the very
+simulation loop :meth:`EpisodicTask.episode` runs (a :class:`PathRecorder` the loop calls
+once at the start and after every control step; it is off for ordinary episodes).
+
 :class:`EpisodicEnv` wraps a task as a one-step gymnasium environment (observation = c,
 action = θ), the form used by ``gym.make``.
 """
@@ -81,6 +86,25 @@ class Rollouts:
         )
 
 
+class PathRecorder:
+    """Collects world positions of named points from a simulation loop.
+
+    The loop calls ``recorder(ball=xyz, ...)`` once at the start and after every control
+    step; :meth:`paths` stacks each name's points into a ``(T, 3)`` float64 array.
+    """
+
+    def __init__(self) -> None:
+        self._points: dict[str, list[np.ndarray]] = {}
+
+    def __call__(self, **points: np.ndarray) -> None:
+        for name, xyz in points.items():
+            self._points.setdefault(name, []).append(np.array(xyz, dtype=np.float64))
+
+    def paths(self) -> dict[str, np.ndarray]:
+        """name → ``(T, 3)`` positions, in the order they were recorded."""
+        return {k: np.asarray(v, dtype=np.float64).reshape(-1, 3) for k, v in self._points.items()}
+
+
 class EpisodicTask:
     """Base class: subclasses set the class attributes and implement :meth:`episode`.
 
@@ -91,6 +115,7 @@ class EpisodicTask:
         n_params: dimension of θ.
         info_keys: keys of :attr:`Episode.info`.
         has_success: whether the task defines success.
+        path_names: the points :meth:`path` records (empty: the task records none).
 
     Subclasses may override :meth:`context_valid` (rejection rules beyond the box),
     :meth:`sample_contexts` (a distribution that is not uniform-with-rejection) and
@@ -105,6 +130,9 @@ class EpisodicTask:
     n_params: ClassVar[int] = 0
     info_keys: ClassVar[tuple[str, ...]] = ()
     has_success: ClassVar[bool] = True
+    path_names: ClassVar[tuple[str, ...]] = ()
+    #: Set only while :meth:`path` runs: the simulation loop hands it the path points.
+    _recorder: PathRecorder | None = None
 
     def __init__(self, **kwargs: Any) -> None:
         self._kwargs = dict(kwargs)
@@ -196,12 +224,45 @@ class EpisodicTask:
         """
         raise NotImplementedError(f"{self.name}: no MuJoCo scene (the task is not simulated)")
 
+    def path(self, theta: Any, context: Any) -> dict[str, np.ndarray]:
+        """World positions of the task's moving points over one episode (θ, c).
+
+        Runs :meth:`episode` once with a :class:`PathRecorder` switched on, so the points
+        come from the simulation :meth:`evaluate` runs (same physics, same numbers). Returns
+        name → ``(T, 3)`` float64 (metres, world frame), one row for the start state and one
+        after every control step (the last one where the episode ended); the names are
+        :attr:`path_names`. An invalid θ, which the task rejects before simulating, is a
+        ``ValueError``; a task that records no path raises ``NotImplementedError``.
+        """
+        if not self.path_names:
+            raise NotImplementedError(f"{self.name}: records no path over an episode")
+        c = self.one_context(context)
+        th = self.check_theta(theta, n=1)[0]
+        recorder = PathRecorder()
+        self._recorder = recorder
+        try:
+            ep = self.episode(th, c)
+        finally:
+            self._recorder = None
+        if not ep.executed:
+            raise ValueError(
+                f"{self.name}: theta is invalid and was rejected before simulation (return "
+                f"{ep.ret:g}): it has no path"
+            )
+        paths = recorder.paths()
+        missing = set(self.path_names) - set(paths)
+        if missing:  # pragma: no cover - a simulation loop that forgot to record
+            raise RuntimeError(f"{self.name}: the simulation recorded no {sorted(missing)}")
+        return {k: paths[k] for k in self.path_names}
+
     def one_context(self, context: Any) -> np.ndarray:
         """A single valid context ``(d,)``, or a clear error."""
         c = self.check_contexts(context)
         if len(c) != 1:
-            raise ValueError(f"{self.name}: expected one context of shape ({self.context_dim},), "
-                             f"got {np.shape(context)}")
+            raise ValueError(
+                f"{self.name}: expected one context of shape ({self.context_dim},), "
+                f"got {np.shape(context)}"
+            )
         return c[0]
 
     # -- episodes -----------------------------------------------------------------------
