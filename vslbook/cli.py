@@ -4,6 +4,7 @@
     vslbook algorithms                      registered algorithms and their envs
     vslbook figures                         registered figures
     vslbook run ALGO --env ENV --seed S --budget B [--set key=value ...] [--root runs]
+    vslbook run ALGO --env ENV --seeds 0 1 2 ...   several seeds in one process
     vslbook sweep ALGO --env ENV [--env ENV2] --seeds 0 1 2 [--grid key=v1,v2] \
                   [--executor debug|local|slurm] [--slurm slurm.yaml]
     vslbook figure ID [--budget B] [--out DIR]
@@ -83,7 +84,14 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("run", help="train one algorithm on one env with one seed", **algo_help)
     r.add_argument("algo", help="a registered algorithm (listed below)")
     r.add_argument("--env", required=True, help="environment id, e.g. vslbook/PointReach-v0")
-    r.add_argument("--seed", type=_seed, default=0, help="integer >= 0 (default 0)")
+    one = r.add_mutually_exclusive_group()
+    # default None, not 0: argparse cannot tell an explicit "--seed 0" from a default 0
+    one.add_argument("--seed", type=_seed, default=None, help="integer >= 0 (default 0)")
+    one.add_argument(
+        "--seeds", type=_seed, nargs="+", default=None,
+        help="several seeds in one process (DIME and its variants: a seed axis on every "
+        "tensor); one run directory per seed",
+    )  # fmt: skip
     r.add_argument(
         "--budget",
         default=None,
@@ -143,13 +151,24 @@ def _dispatch(args: argparse.Namespace) -> int:
             extra = f"  [{', '.join(item.envs)}]" if getattr(item, "envs", ()) else ""
             print(f"{name:24s} {item.doc}{extra}")
         return 0
+    if args.command == "run" and args.seeds is not None:
+        from vslbook.training import run_seeds
+
+        rds = run_seeds(
+            args.algo, args.env, args.seeds, args.budget, root=args.root,
+            overrides=_pairs(args.set, lists=False), progress=not args.no_progress,
+            reuse_stale=True if args.reuse_stale else None,
+        )  # fmt: skip
+        for rd in rds:
+            print(rd.path, rd.status)
+        return 1 if any(rd.failed for rd in rds) else 0
     if args.command == "run":
         from vslbook.training import run
 
         rd = run(
             args.algo,
             args.env,
-            args.seed,
+            0 if args.seed is None else args.seed,
             args.budget,
             root=args.root,
             overrides=_pairs(args.set, lists=False),

@@ -44,6 +44,9 @@ class Algorithm:
             so that a preset chosen by one of them (the 5-link reacher's reward) can be
             found. Such a config holds the budget's counts itself; None: ``config()``,
             whose full-budget counts the training loop scales.
+        train_seeds: ``train_seeds(runs, records, budget, *, progress, stop_after) -> list``
+            that trains several seeds in one process (``vslbook run ALGO --seeds 0 1 2``);
+            None: one seed per process.
     """
 
     name: str
@@ -53,6 +56,7 @@ class Algorithm:
     doc: str = ""
     independent_of: tuple[str, ...] = ()
     defaults: Callable[..., Any] | None = None
+    train_seeds: Callable[..., list] | None = None
 
     def check_env(self, env: str) -> None:
         """Raise a clear error if ``env`` is not one this algorithm is meant for."""
@@ -91,10 +95,11 @@ def register_algorithm(
     doc: str = "",
     independent_of: tuple[str, ...] = (),
     defaults: Callable[..., Any] | None = None,
+    train_seeds: Callable[..., list] | None = None,
 ) -> Algorithm:
     algo = Algorithm(
         name=name, train=train, config=config, envs=tuple(envs), doc=doc,
-        independent_of=tuple(independent_of), defaults=defaults,
+        independent_of=tuple(independent_of), defaults=defaults, train_seeds=train_seeds,
     )  # fmt: skip
     ALGORITHMS[name] = algo
     return algo

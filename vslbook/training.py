@@ -101,6 +101,70 @@ def run(
     return rd
 
 
+def run_seeds(
+    algo: str,
+    env: str,
+    seeds: list[int],
+    budget: str | Budget | None = None,
+    *,
+    root: str | Path = "runs",
+    overrides: dict[str, Any] | None = None,
+    progress: bool = True,
+    stop_after: int | None = None,
+    reuse_stale: bool | None = None,
+) -> list[RunDir]:
+    """Train ``seeds`` of ``algo`` on ``env`` in one process; one run directory per seed.
+
+    The directories are those :func:`run` makes for each seed (same names and format):
+    finished ones are reused, failed ones left alone, the others trained together (for
+    DIME and its variants a seed axis on every tensor, :mod:`vslbook.srl.dime_seeds`),
+    resuming from their checkpoints. Seeds whose checkpoints are at different steps are
+    trained in groups of equal step, one group after the other.
+    """
+    spec = get_algorithm(algo)
+    if spec.train_seeds is None:
+        raise ValueError(
+            f"algorithm {algo!r} trains one seed per process; use --seed (or vslbook sweep)"
+        )
+    seeds = list(seeds)
+    if not seeds or len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds must be distinct and at least one, got {seeds}")
+    for seed in seeds:
+        check_run_request(spec, env, seed)
+    bud = get_budget(budget)
+    config = config_from_overrides(spec.config, overrides, spec.default_config(env, bud, overrides))
+    out: list[RunDir] = []
+    groups: dict[int, list[tuple[RunDir, dict]]] = {}
+    for seed in seeds:
+        record = {"algo": algo, "env": env, "seed": int(seed), "budget": bud.name,
+                  **dataclasses.asdict(config)}  # fmt: skip
+        rd = RunDir.create(root, record, code_exclude=spec.independent_of)
+        if not rd.code_matches:
+            rd = _stale(rd, root, record, reuse_stale, spec.independent_of)
+        out.append(rd)
+        if rd.failed:
+            warnings.warn(f"run {rd.name} diverged before; not re-run", stacklevel=2)
+        elif not rd.done:
+            saved = rd.load_checkpoint()
+            groups.setdefault(0 if saved is None else int(saved["step"]), []).append((rd, record))
+    import torch
+
+    threads = torch.get_num_threads()
+    try:
+        for _, group in sorted(groups.items()):
+            runs, records = [g[0] for g in group], [g[1] for g in group]
+            results = spec.train_seeds(runs, records, bud, progress=progress,
+                                       stop_after=stop_after)  # fmt: skip
+            for rd, result in zip(runs, results, strict=True):
+                if isinstance(result, DivergenceError):
+                    warnings.warn(f"run {rd.name} {result}; marked FAILED", stacklevel=2)
+                elif result is not None:
+                    rd.mark_done(result)
+    finally:
+        torch.set_num_threads(threads)
+    return out
+
+
 def _reuse_from_env() -> bool:
     return os.environ.get(REUSE_STALE_ENV, "").strip().lower() in ("1", "true", "yes")
 

@@ -297,6 +297,8 @@ def train(
 
     step = episode = n_updates = n_evals = 0
     last_eval: dict[str, Any] = {}
+    episode_actions: list = []  # a checkpoint of vslbook.srl.dime_seeds may cut an episode
+    episode_return = 0.0
     state = run.load_checkpoint()
     if state is not None:
         agent.load_state_dict(state["agent"])
@@ -308,6 +310,8 @@ def train(
         )
         last_eval = state["last_eval"]
         restore_rng_state(state["rng"], rng)
+        episode_actions = state.get("episode_actions", [])
+        episode_return = float(state.get("episode_return", 0.0))
 
     def checkpoint(final: bool = False) -> None:
         run.save_checkpoint(
@@ -334,7 +338,8 @@ def train(
     steps_this_call = 0
     next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
     obs, _ = env.reset(seed=_stream_seed(seed, TRAIN_RESETS, episode))
-    episode_return = 0.0
+    for action in episode_actions:  # replay the cut episode (deterministic simulators)
+        obs, *_ = env.step(_to_env_action(np.asarray(action, np.float32), env.action_space))
     while step < total_steps:
         # l. 3-5: a ~ π(·|s) (uniform at first), s' ~ p(·|s, a), D ← D ∪ {(s, a, r, s', term)}
         if step < learning_starts:
@@ -424,12 +429,21 @@ def train(
 # Chapter 5's runs never import the episodic (Chapters 2-4) code.
 _NOT_SRL = ("erl/", "envs/robot/")
 
+
+def _train_seeds(*args: Any, config_cls: type[DIMEConfig] = DIMEConfig, **kwargs: Any) -> list:
+    """:func:`vslbook.srl.dime_seeds.train_seeds` (several seeds in one process)."""
+    from vslbook.srl.dime_seeds import train_seeds
+
+    return train_seeds(*args, config_cls=config_cls, **kwargs)
+
+
 register_algorithm(
     "dime",
     train=train,
     config=DIMEConfig,
     doc="DIME (Algorithm 4): diffusion policy, distributional CrossQ critics, autotuned α",
     independent_of=_NOT_SRL,
+    train_seeds=_train_seeds,
 )
 register_algorithm(
     "dime-gaussian",
@@ -437,6 +451,7 @@ register_algorithm(
     config=DIMEGaussianConfig,
     doc="DIME's critic and updates with a tanh-Gaussian policy (Fig. 5.4c-d ablation)",
     independent_of=_NOT_SRL,
+    train_seeds=partial(_train_seeds, config_cls=DIMEGaussianConfig),
 )
 register_algorithm(
     "crossq",
@@ -444,4 +459,5 @@ register_algorithm(
     config=CrossQConfig,
     doc="CrossQ: tanh-Gaussian policy, BatchRenorm scalar critics, no target network",
     independent_of=_NOT_SRL,
+    train_seeds=partial(_train_seeds, config_cls=CrossQConfig),
 )

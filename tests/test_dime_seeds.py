@@ -1,0 +1,80 @@
+"""Several DIME seeds in one process (vslbook.training.run_seeds, vslbook.srl.dime_seeds)."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from vslbook.cli import main
+from vslbook.training import run, run_seeds
+
+ENV = "Pendulum-v1"
+TINY = dict(
+    total_steps=200_000,  # 400 env steps (two Pendulum episodes) at the smoke budget
+    learning_starts=50, critic_hidden=32, actor_hidden=32, n_diffusion_steps=2,
+    batch_size=32, eval_every=100_000, eval_episodes=1, checkpoint_every=100_000,
+    v_min=-1600.0, v_max=100.0, num_threads=1,
+)  # fmt: skip
+CLOCKS = {"critic_updates_per_s", "env_steps_per_s"}
+
+
+def _rows(rd):
+    return [json.loads(x) for x in (rd.path / "metrics.jsonl").read_text().splitlines()]
+
+
+def _no_clocks(rows):
+    return [{k: v for k, v in r.items() if k not in CLOCKS} for r in rows]
+
+
+def test_each_seed_learns_as_it_would_alone(tmp_path):
+    alone = [run("dime", ENV, s, "smoke", root=tmp_path / "one", overrides=TINY,
+                 progress=False) for s in (0, 1, 2)]  # fmt: skip
+    together = run_seeds("dime", ENV, [0, 1, 2], "smoke", root=tmp_path / "three",
+                         overrides=TINY, progress=False)  # fmt: skip
+    for a, b in zip(alone, together, strict=True):
+        assert a.name == b.name and b.done  # the same run directory a single run makes
+        ra, rb = _rows(a)[-1], _rows(b)[-1]
+        assert ra["critic_updates"] == rb["critic_updates"] and ra["episodes"] == rb["episodes"]
+        for key in ("critic_loss", "q_mean", "alpha", "actor_loss", "train_return"):
+            assert rb[key] == pytest.approx(ra[key], rel=2e-3, abs=1e-3), key
+    # three different seeds, three different runs
+    assert len({_rows(b)[-1]["train_return"] for b in together}) == 3
+
+
+def test_interrupted_mid_episode_resumes_exactly(tmp_path):
+    whole = run_seeds("dime", ENV, [3, 4], "smoke", root=tmp_path / "a", overrides=TINY,
+                      progress=False)  # fmt: skip
+    part = run_seeds("dime", ENV, [3, 4], "smoke", root=tmp_path / "b", overrides=TINY,
+                     progress=False, stop_after=130)  # fmt: skip
+    assert not any(rd.done for rd in part)  # stopped at step 130, inside the first episode
+    part = run_seeds("dime", ENV, [3, 4], "smoke", root=tmp_path / "b", overrides=TINY,
+                     progress=False)  # fmt: skip
+    for a, b in zip(whole, part, strict=True):
+        assert b.done and _no_clocks(_rows(a)) == _no_clocks(_rows(b))
+
+
+def test_a_single_seed_run_resumes_a_stacked_checkpoint(tmp_path):
+    """The checkpoint format is the single-seed one (plus the cut episode's actions)."""
+    (part,) = run_seeds("dime", ENV, [5], "smoke", root=tmp_path, overrides=TINY,
+                        progress=False, stop_after=130)  # fmt: skip
+    assert not part.done
+    rd = run("dime", ENV, 5, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert rd.path == part.path and rd.done
+    ref = run("dime", ENV, 5, "smoke", root=tmp_path / "ref", overrides=TINY, progress=False)
+    got, want = _rows(rd)[-1], _rows(ref)[-1]
+    assert got["critic_updates"] == want["critic_updates"]
+    assert got["alpha"] == pytest.approx(want["alpha"], rel=2e-3)
+
+
+def test_bad_requests_are_clear_errors(tmp_path, capsys):
+    with pytest.raises(ValueError, match="'erl-pg' trains one seed per process"):
+        run_seeds("erl-pg", "vslbook/PointReach-v0", [0, 1], root=tmp_path)
+    with pytest.raises(ValueError, match=r"seeds must be distinct.*\[1, 1\]"):
+        run_seeds("dime", ENV, [1, 1], root=tmp_path)
+    with pytest.raises(ValueError, match="seed must be a non-negative integer, got -1"):
+        run_seeds("dime", ENV, [0, -1], root=tmp_path)
+    assert not any(tmp_path.iterdir())
+    with pytest.raises(SystemExit):
+        main(["run", "dime", "--env", ENV, "--seed", "0", "--seeds", "1", "2"])
+    assert "not allowed with argument" in capsys.readouterr().err

@@ -1,0 +1,292 @@
+"""Algorithm 4 for S seeds in one process: the loop of :func:`vslbook.srl.dime.train` over a
+seed axis (:class:`~vslbook.srl.seed_axis.SeedStack`).
+
+Each seed has its own run directory, environment, replay buffer, numpy generator (uniform
+exploration, replay indices) and torch generator (policy noise), seeded as its single-seed
+run seeds them, and its own evaluations and diagnostics; only the network updates are
+batched. Per seed the numbers are those of a single-seed run up to float rounding (batched
+matrix products round differently), which the tests check update by update.
+
+Checkpoints. All seeds are checkpointed at the same environment step (every
+``checkpoint_every`` steps, and when ``stop_after`` stops the run), each into its own run
+directory in the single-seed format, plus the actions of each seed's unfinished episode:
+on resume the environment is reset with that episode's seed and the actions are replayed
+(the simulators are deterministic), so no simulator state is pickled and an episode may be
+cut anywhere. A seed whose losses or parameters stop being finite is marked FAILED and
+leaves the stack; the others go on.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from vslbook.budget import Budget
+from vslbook.registry import config_from_record
+from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
+from vslbook.seeding import seed_everything
+from vslbook.srl import dime
+from vslbook.srl.dime_config import DIMEConfig
+from vslbook.srl.dime_updates import make_agent, resolve_device
+from vslbook.srl.replay import Batch, ReplayBuffer
+from vslbook.srl.seed_axis import SeedStack
+
+__all__ = ["train_seeds"]
+
+
+class _Seed:
+    """What one seed owns: its run directory, streams, environments, buffer and counters."""
+
+    def __init__(self, run: RunDir, record: dict, cfg: DIMEConfig, budget: Budget, device) -> None:
+        self.run, self.seed = run, int(record["seed"])
+        env_id = record["env"]
+        seed_everything(self.seed, deterministic_torch=False)  # as a single-seed run does
+        self.rng = np.random.default_rng(self.seed)
+        self.env, self.eval_env = dime.make_env(env_id), dime.make_env(env_id)
+        obs_dim, act_dim = self.env.observation_space.shape[0], self.env.action_space.shape[0]
+        v_min, v_max = cfg.v_min, cfg.v_max
+        if cfg.critic == "distributional" and v_min is None:
+            v_min, v_max = dime.default_value_range(env_id)
+        self.v_range = (v_min, v_max)
+        self.agent = make_agent(obs_dim, act_dim, cfg, v_min=v_min, v_max=v_max, device=device)
+        self.generator = torch.Generator(device=device)
+        self.generator.set_state(torch.get_rng_state())  # the global stream after the init
+        total = budget.scale(cfg.total_steps)
+        self.buffer = ReplayBuffer(min(cfg.buffer_size, total), obs_dim, act_dim, device)
+        self.diag = dime._Means(device)
+        self.step = self.episode = self.updates = self.evals = 0
+        self.last_eval: dict[str, Any] = {}
+        self.actions: list[np.ndarray] = []  # this episode's actions so far
+        self.episode_return = 0.0
+        state = run.load_checkpoint()
+        if state is not None:
+            self.agent.load_state_dict(state["agent"])
+            if state["replay"] is not None:
+                self.buffer.load_state_dict(state["replay"])
+            self.diag.load_state_dict(state["diagnostics"])
+            self.step, self.episode, self.updates, self.evals = (
+                state[k] for k in ("step", "episode", "updates", "evals")
+            )
+            self.last_eval = state["last_eval"]
+            restore_rng_state(state["rng"], self.rng)
+            self.generator.set_state(torch.get_rng_state())
+            self.actions = [np.asarray(a, np.float32) for a in state.get("episode_actions", [])]
+            self.episode_return = float(state.get("episode_return", 0.0))
+        self.obs = self._replay()
+
+    def _replay(self) -> np.ndarray:
+        """Reset to this episode's start and replay its actions so far (after a resume)."""
+        obs, _ = self.env.reset(seed=dime._stream_seed(self.seed, dime.TRAIN_RESETS, self.episode))
+        for a in self.actions:
+            obs, *_ = self.env.step(dime._to_env_action(a, self.env.action_space))
+        return obs
+
+    def checkpoint(self, stack: SeedStack, index: int, final: bool = False) -> None:
+        torch_state = torch.get_rng_state()
+        torch.set_rng_state(self.generator.get_state())  # the single-seed format: global RNG
+        try:
+            rng = rng_state(self.rng)
+        finally:
+            torch.set_rng_state(torch_state)
+        self.run.save_checkpoint(
+            {
+                "agent": stack.agent_state(index),
+                "replay": None if final else self.buffer.state_dict(),
+                "diagnostics": self.diag.state_dict(),
+                "step": self.step,
+                "episode": self.episode,
+                "updates": self.updates,
+                "evals": self.evals,
+                "last_eval": self.last_eval,
+                "rng": rng,
+                "episode_actions": [a.tolist() for a in self.actions],
+                "episode_return": self.episode_return,
+            }
+        )
+
+
+def train_seeds(
+    runs: list[RunDir],
+    records: list[dict],
+    budget: Budget,
+    *,
+    progress: bool = True,
+    stop_after: int | None = None,
+    config_cls: type[DIMEConfig] = DIMEConfig,
+) -> list[dict | None]:
+    """Train the seeds of ``records`` (one run directory each) together, resuming them.
+
+    The records differ only in ``seed``; their checkpoints (if any) must be at the same
+    environment step. Returns per seed a summary when finished, None when stopped early
+    (``stop_after`` environment steps of this call) and the
+    :class:`~vslbook.results.DivergenceError` of a seed that diverged.
+    """
+    if len(runs) != len(records) or not runs:
+        raise ValueError(f"need one run directory per record, got {len(runs)} and {len(records)}")
+    cfg = config_from_record(config_cls, records[0])
+    for r in records[1:]:
+        if config_from_record(config_cls, r) != cfg or r["env"] != records[0]["env"]:
+            raise ValueError("the seeds trained together must share env and configuration")
+    if cfg.num_threads:
+        torch.set_num_threads(cfg.num_threads)
+    device = resolve_device(cfg.device)
+    total_steps = budget.scale(cfg.total_steps)
+    learning_starts = min(cfg.learning_starts, total_steps)
+    eval_every = dime._scaled(budget, cfg.eval_every)
+    checkpoint_every = dime._scaled(budget, cfg.checkpoint_every)
+    eval_episodes = cfg.eval_episodes or budget.eval_episodes
+    seeds = [_Seed(run, rec, cfg, budget, device) for run, rec in zip(runs, records, strict=True)]
+    steps = {s.step for s in seeds}
+    if len(steps) != 1:
+        raise ValueError(f"seeds trained together must resume from one step, got {sorted(steps)}")
+    step = steps.pop()
+    results: list[Any] = [None] * len(seeds)
+    live = list(range(len(seeds)))  # indices of the seeds still training
+    stack = SeedStack([s.agent for s in seeds])
+    act_dim = seeds[0].env.action_space.shape[0]
+    env_id = records[0]["env"]
+    bar = tqdm(total=total_steps, initial=step, disable=not progress,
+               desc=f"{records[0].get('algo', 'dime')} {env_id} seeds "
+                    f"{','.join(str(s.seed) for s in seeds)}")  # fmt: skip
+    clock, steps_at_clock = time.perf_counter(), step
+    updates_at_clock = seeds[0].updates
+    next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
+    steps_this_call = 0
+
+    def drop(failed: list[int], err: DivergenceError) -> SeedStack:
+        """Mark ``failed`` (positions in ``live``) FAILED and stack the others again."""
+        for pos in failed:
+            seeds[live[pos]].run.mark_failed(err)
+            results[live[pos]] = err
+        keep = [i for pos, i in enumerate(live) if pos not in failed]
+        states = {i: stack.agent_state(pos) for pos, i in enumerate(live) if i in keep}
+        for i in keep:
+            seeds[i].agent.load_state_dict(states[i])
+        live[:] = keep
+        return SeedStack([seeds[i].agent for i in keep]) if keep else stack
+
+    def failed_paths() -> set:
+        return {seeds[i].run.path for i in range(len(seeds)) if i not in live}
+
+    def check(values: dict[str, torch.Tensor]) -> None:
+        nonlocal stack
+        bad = ~torch.stack([v.reshape(len(live)) for v in values.values()]).isfinite().all(0)
+        if bool(bad.any()):
+            failed = [int(p) for p in torch.nonzero(bad).flatten()]
+            name = next(k for k, v in values.items() if not bool(v[failed[0]].isfinite()))
+            stack = drop(failed, DivergenceError(step, name, float(values[name][failed[0]])))
+
+    while step < total_steps and live:
+        own = [seeds[i] for i in live]
+        if step < learning_starts:
+            actions = [s.rng.uniform(-1.0, 1.0, size=act_dim).astype(np.float32) for s in own]
+        else:
+            obs = torch.as_tensor(np.stack([s.obs for s in own]), dtype=torch.float32,
+                                  device=device)  # fmt: skip
+            noise = stack.noise([s.generator for s in own], 1)
+            actions = list(stack.act(obs, noise).cpu().numpy())
+        ends = []
+        for s, a in zip(own, actions, strict=True):
+            next_obs, reward, terminated, truncated, _ = s.env.step(
+                dime._to_env_action(a, s.env.action_space)
+            )
+            s.buffer.add(s.obs, a, reward, next_obs, terminated)
+            s.obs, s.episode_return = next_obs, s.episode_return + float(reward)
+            s.actions.append(np.asarray(a))
+            s.step += 1
+            ends.append(terminated or truncated)
+        step += 1
+        steps_this_call += 1
+
+        if step >= learning_starts:
+            for _ in range(cfg.utd):
+                batches = [s.buffer.sample(cfg.batch_size, s.rng) for s in own]
+                batch = Batch(*[torch.stack(x) for x in zip(*batches, strict=True)])
+                noise = stack.noise([s.generator for s in own], cfg.batch_size)
+                critic_stats = stack.critic_update(batch, noise)
+                for s in own:
+                    s.updates += 1
+                check({"critic_loss": critic_stats.loss, "q_mean": critic_stats.value})
+                if len(live) != len(own):
+                    break
+                for k, s in enumerate(own):
+                    s.diag.add("critic_loss", critic_stats.loss[k])
+                    s.diag.add("q_mean", critic_stats.value[k])
+                if own[0].updates % cfg.policy_delay == 0:
+                    noise = stack.noise([s.generator for s in own], cfg.batch_size)
+                    actor_stats = stack.actor_update(batch.obs, noise)
+                    alpha_loss = stack.alpha_update(actor_stats.running_cost)
+                    check({"actor_loss": actor_stats.loss, "entropy_bound": actor_stats.value,
+                           "alpha_loss": alpha_loss})  # fmt: skip
+                    if len(live) != len(own):
+                        break
+                    for k, s in enumerate(own):
+                        s.diag.add("actor_loss", actor_stats.loss[k])
+                        s.diag.add("entropy_bound", actor_stats.value[k])
+                        s.diag.add("running_cost", actor_stats.running_cost[k].mean())
+            if len(live) != len(own):
+                continue  # a seed left the stack; the others go on from the next step
+
+        if step % eval_every == 0 or step == total_steps:
+            now = time.perf_counter()
+            elapsed = max(now - clock, 1e-9)
+            for k, s in enumerate(own):
+                s.agent.load_state_dict(stack.agent_state(k))  # its policy, as one module
+                try:
+                    dime._require_finite_parameters(step, s.agent)
+                except DivergenceError as err:
+                    stack = drop([k], err)
+                    continue
+                ret, success = dime.evaluate(
+                    s.agent.policy, s.eval_env, seed=s.seed, index=s.evals,
+                    episodes=eval_episodes, device=device,
+                )  # fmt: skip
+                s.evals += 1
+                row: dict[str, Any] = {"eval_return": ret}
+                if success is not None:
+                    row["eval_success"] = success
+                row.update(s.diag.pop())
+                if hasattr(s.agent.policy, "noise_var"):
+                    betas = s.agent.policy.noise_var.detach().cpu().tolist()
+                    row.update({f"beta_{j}": v for j, v in enumerate(betas)})
+                row.update(
+                    alpha=float(s.agent.alpha.item()), critic_updates=s.updates,
+                    episodes=s.episode,
+                    critic_updates_per_s=(s.updates - updates_at_clock) / elapsed,
+                    env_steps_per_s=(step - steps_at_clock) / elapsed,
+                )  # fmt: skip
+                s.run.log(step, **row)
+                s.last_eval = {"eval_return": ret, "eval_success": success}
+            clock, steps_at_clock = time.perf_counter(), step
+            updates_at_clock = seeds[live[0]].updates if live else 0
+        bar.update(1)
+
+        for s, ended in zip(own, ends, strict=True):
+            if ended and s.run.path not in failed_paths():
+                s.diag.add("train_return", s.episode_return)
+                s.episode += 1
+                s.actions, s.episode_return = [], 0.0
+                s.obs, _ = s.env.reset(
+                    seed=dime._stream_seed(s.seed, dime.TRAIN_RESETS, s.episode)
+                )
+        stopping = stop_after is not None and steps_this_call >= stop_after
+        if step < total_steps and (step >= next_checkpoint or stopping):
+            for k, i in enumerate(live):
+                seeds[i].checkpoint(stack, k)
+            next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
+        if stopping and step < total_steps:
+            bar.close()
+            return results
+    bar.close()
+    for k, i in enumerate(live):
+        s = seeds[i]
+        s.checkpoint(stack, k, final=True)
+        results[i] = {
+            "env_steps": total_steps, "critic_updates": s.updates, "episodes": s.episode,
+            **s.last_eval, "v_min": s.v_range[0], "v_max": s.v_range[1],
+        }  # fmt: skip
+    return results
