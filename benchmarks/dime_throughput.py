@@ -12,7 +12,13 @@ updates per second (the actor rate is a third of the critic rate by construction
 next to the official JAX implementation's numbers on a 2-core AMD EPYC CPU (float32, from
 the project's algorithm notes). Warm-up updates are excluded from the timing.
 
+With ``--seeds S`` a second table times the same schedule for S seeds in one process
+(:class:`vslbook.srl.seed_axis.SeedStack`: every tensor with a seed axis) and for one seed
+through the same path: updates per second per seed and in aggregate, and the wall time of S
+seeds' update against one seed's (the target of 1.5x is a CPU with 2 cores at 4x256).
+
     python benchmarks/dime_throughput.py --device cpu --steps 30 --seconds 60
+    python benchmarks/dime_throughput.py --configs 4x256 --seeds 3
 """
 
 from __future__ import annotations
@@ -33,7 +39,8 @@ from vslbook.srl.dime import (
     make_agent,
     resolve_device,
 )
-from vslbook.srl.replay import ReplayBuffer
+from vslbook.srl.replay import Batch, ReplayBuffer
+from vslbook.srl.seed_axis import SeedStack
 
 OBS_DIM, ACT_DIM, BATCH = 67, 21, 256
 #: name -> (diffusion steps, critic width, reference critic/s, reference actor/s)
@@ -127,6 +134,51 @@ def measure(
     }
 
 
+def _filled_buffer(device: torch.device, rng: np.random.Generator) -> ReplayBuffer:
+    buffer = ReplayBuffer(10_000, OBS_DIM, ACT_DIM, device)
+    for _ in range(10_000):
+        buffer.add(
+            rng.standard_normal(OBS_DIM), rng.uniform(-1, 1, ACT_DIM), rng.normal(),
+            rng.standard_normal(OBS_DIM), rng.random() < 0.01,
+        )  # fmt: skip
+    return buffer
+
+
+def measure_seeds(
+    n_steps: int, width: int, seeds: int, *, device: torch.device, updates: int, seconds: float
+) -> dict[str, float]:
+    """The schedule of :func:`measure` for ``seeds`` seeds updated as one (seed axis)."""
+    cfg = DIMEConfig(n_diffusion_steps=n_steps, critic_hidden=width, v_min=-200.0, v_max=200.0)
+    agents = []
+    for s in range(seeds):
+        torch.manual_seed(s)
+        agents.append(make_agent(OBS_DIM, ACT_DIM, cfg, v_min=-200.0, v_max=200.0, device=device))
+    stack = SeedStack(agents)
+    rngs = [np.random.default_rng(s) for s in range(seeds)]
+    buffers = [_filled_buffer(device, r) for r in rngs]
+    gens = [torch.Generator(device=device).manual_seed(s) for s in range(seeds)]
+
+    def schedule(k: int) -> None:
+        for i in range(1, k + 1):
+            parts = [b.sample(cfg.batch_size, r) for b, r in zip(buffers, rngs, strict=True)]
+            batch = Batch(*[torch.stack(x) for x in zip(*parts, strict=True)])
+            stack.critic_update(batch, stack.noise(gens, cfg.batch_size))
+            if i % cfg.policy_delay == 0:
+                stats = stack.actor_update(batch.obs, stack.noise(gens, cfg.batch_size))
+                stack.alpha_update(stats.running_cost)
+        if device.type == "cuda":
+            torch.cuda.synchronize(device)
+
+    schedule(2 * cfg.policy_delay)
+    n, start = 0, time.perf_counter()
+    while n < updates and time.perf_counter() - start < seconds:
+        schedule(cfg.policy_delay)
+        n += cfg.policy_delay
+    wall = time.perf_counter() - start
+    return {"critic_per_s_per_seed": n / wall, "critic_per_s": seeds * n / wall,
+            "ms_per_update": 1e3 * wall / n}  # fmt: skip
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="auto", help="auto | cpu | cuda | cuda:N")
@@ -139,6 +191,9 @@ def main() -> None:
         "--threads", type=int, default=0, help="torch CPU threads (0: physical cores)"
     )
     parser.add_argument("--compile", action="store_true", help="torch.compile the updates")
+    parser.add_argument(
+        "--seeds", type=int, default=0, help="also time S seeds in one process (seed axis)"
+    )
     args = parser.parse_args()
     if args.steps < 1 or args.seconds <= 0:
         parser.error(f"need --steps >= 1 and --seconds > 0, got {args.steps}, {args.seconds}")
@@ -168,6 +223,25 @@ def main() -> None:
             flush=True,
         )
     print("reference: official JAX implementation, 2-core AMD EPYC CPU, float32")
+    if args.seeds > 0:
+        print(f"\nseed axis: 1 and {args.seeds} seeds in one process (critic updates)")
+        head = (f"{'config':8s} {'seeds':>5s} {'per seed/s':>10s} {'aggregate/s':>11s} "
+                f"{'ms/update':>9s} {'x one seed':>10s}")  # fmt: skip
+        print(head)
+        print("-" * len(head))
+        for name in args.configs:
+            n_steps, width = CONFIGS[name][:2]
+            one = None
+            for s in sorted({1, args.seeds}):
+                r = measure_seeds(n_steps, width, s, device=device, updates=args.steps,
+                                  seconds=args.seconds)  # fmt: skip
+                one = one or r["ms_per_update"]
+                print(
+                    f"{name:8s} {s:5d} {r['critic_per_s_per_seed']:10.2f} "
+                    f"{r['critic_per_s']:11.2f} {r['ms_per_update']:9.1f} "
+                    f"{r['ms_per_update'] / one:10.2f}",
+                    flush=True,
+                )
     _ = dataclasses  # keeps the import for readers extending the configs
 
 
