@@ -227,6 +227,26 @@ class _Means:
         self.counts = dict(state["counts"])
 
 
+def eval_row(
+    agent: Agent, diag: _Means, eval_return: float, eval_success: float | None, *,
+    updates: int, episodes: int, updates_per_s: float, steps_per_s: float,
+) -> dict[str, Any]:  # fmt: skip
+    """One evaluation's row of ``metrics.jsonl``: return (and success), the diagnostics'
+    means since the last row, the learned β per dimension (Fig. C.2), α, counts and rates."""
+    row: dict[str, Any] = {"eval_return": eval_return}
+    if eval_success is not None:
+        row["eval_success"] = eval_success
+    row.update(diag.pop())
+    if hasattr(agent.policy, "noise_var"):  # Fig. C.2: the learned β_k = σ_k² per dim
+        betas = agent.policy.noise_var.detach().cpu().tolist()
+        row.update({f"beta_{k}": value for k, value in enumerate(betas)})
+    row.update(
+        alpha=float(agent.alpha.item()), critic_updates=updates, episodes=episodes,
+        critic_updates_per_s=updates_per_s, env_steps_per_s=steps_per_s,
+    )  # fmt: skip
+    return row
+
+
 def _require_finite(step: int, **values: Tensor) -> None:
     """Raise :class:`DivergenceError` naming the first non-finite value (one host sync)."""
     stacked = torch.stack([v.detach().reshape(()).float() for v in values.values()])
@@ -382,20 +402,11 @@ def train(
             n_evals += 1
             now = time.perf_counter()
             elapsed = max(now - clock, 1e-9)
-            row: dict[str, Any] = {"eval_return": eval_return}
-            if eval_success is not None:
-                row["eval_success"] = eval_success
-            row.update(diag.pop())
-            if hasattr(agent.policy, "noise_var"):  # Fig. C.2: the learned β_k = σ_k² per dim
-                betas = agent.policy.noise_var.detach().cpu().tolist()
-                row.update({f"beta_{k}": value for k, value in enumerate(betas)})
-            row.update(
-                alpha=float(agent.alpha.item()),
-                critic_updates=n_updates,
-                episodes=episode,
-                critic_updates_per_s=(n_updates - updates_at_clock) / elapsed,
-                env_steps_per_s=(step - steps_at_clock) / elapsed,
-            )
+            row = eval_row(
+                agent, diag, eval_return, eval_success, updates=n_updates, episodes=episode,
+                updates_per_s=(n_updates - updates_at_clock) / elapsed,
+                steps_per_s=(step - steps_at_clock) / elapsed,
+            )  # fmt: skip
             run.log(step, **row)
             last_eval = {"eval_return": eval_return, "eval_success": eval_success}
             bar.set_postfix(ret=f"{eval_return:.1f}", alpha=f"{row['alpha']:.3g}")

@@ -246,18 +246,10 @@ def train_seeds(
                     episodes=eval_episodes, device=device,
                 )  # fmt: skip
                 s.evals += 1
-                row: dict[str, Any] = {"eval_return": ret}
-                if success is not None:
-                    row["eval_success"] = success
-                row.update(s.diag.pop())
-                if hasattr(s.agent.policy, "noise_var"):
-                    betas = s.agent.policy.noise_var.detach().cpu().tolist()
-                    row.update({f"beta_{j}": v for j, v in enumerate(betas)})
-                row.update(
-                    alpha=float(s.agent.alpha.item()), critic_updates=s.updates,
-                    episodes=s.episode,
-                    critic_updates_per_s=(s.updates - updates_at_clock) / elapsed,
-                    env_steps_per_s=(step - steps_at_clock) / elapsed,
+                row = dime.eval_row(
+                    s.agent, s.diag, ret, success, updates=s.updates, episodes=s.episode,
+                    updates_per_s=(s.updates - updates_at_clock) / elapsed,
+                    steps_per_s=(step - steps_at_clock) / elapsed,
                 )  # fmt: skip
                 s.run.log(step, **row)
                 s.last_eval = {"eval_return": ret, "eval_success": success}
