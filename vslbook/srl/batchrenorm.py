@@ -74,32 +74,43 @@ class BatchRenorm1d(nn.Module):
         return int(self.steps) >= self.warmup_steps
 
     def forward(self, x: Tensor) -> Tensor:
+        """Normalise ``x`` (batch, num_features); in training mode update the statistics.
+
+        Written as one affine map per feature, x ↦ x · a + c, so that only a single
+        operation touches the (batch, features) tensor in each direction (the updates of
+        small critics are dominated by such per-element passes): in training
+        a = γ r / σ_B and c = β + γ (d - μ_B r / σ_B), which is γ((x - μ_B)/σ_B · r + d) + β
+        with the gradient flowing through μ_B and σ_B (not r, d); in eval mode a = γ / σ and
+        c = β - μ a.
+        """
         if x.dim() != 2 or x.shape[1] != self.num_features:
             raise ValueError(f"expected input (batch, {self.num_features}), got {tuple(x.shape)}")
         if not self.training:
-            x_hat = (x - self.running_mean) / torch.sqrt(self.running_var + self.eps)
-            return x_hat * self.weight + self.bias
+            scale = self.weight * torch.rsqrt(self.running_var + self.eps)
+            return torch.addcmul(self.bias - self.running_mean * scale, x, scale)
 
-        mean = x.mean(dim=0)
-        var = x.var(dim=0, unbiased=False)
-        std = torch.sqrt(var + self.eps)
+        var, mean = torch.var_mean(x, dim=0, unbiased=False)
+        inv_std = torch.rsqrt(var + self.eps)
         with torch.no_grad():  # stop-gradient through r and d (Ioffe 2017, Alg. 1)
-            running_std = torch.sqrt(self.running_var + self.eps)
-            r = (std / running_std).clamp(1.0 / self.r_max, self.r_max)
-            d = ((mean - self.running_mean) / running_std).clamp(-self.d_max, self.d_max)
+            inv_running_std = torch.rsqrt(self.running_var + self.eps)
+            r = (inv_std.detach().reciprocal() * inv_running_std).clamp(
+                1.0 / self.r_max, self.r_max
+            )
+            d = ((mean.detach() - self.running_mean) * inv_running_std).clamp(
+                -self.d_max, self.d_max
+            )
             # r = 1, d = 0 during warm-up; a tensor test, so no host sync on accelerators
             warm = self.steps >= self.warmup_steps
             r = torch.where(warm, r, torch.ones_like(r))
             d = torch.where(warm, d, torch.zeros_like(d))
-        x_hat = (x - mean) / std * r + d
-
-        with torch.no_grad():
             n = x.shape[0]
-            unbiased_var = var * n / max(n - 1, 1)
-            self.running_mean.mul_(self.momentum).add_((1.0 - self.momentum) * mean)
-            self.running_var.mul_(self.momentum).add_((1.0 - self.momentum) * unbiased_var)
+            m = self.momentum  # (lerp_ would do, but has no vmap batching rule)
+            self.running_mean.mul_(m).add_(mean.detach(), alpha=1.0 - m)
+            self.running_var.mul_(m).add_(var.detach(), alpha=(1.0 - m) * n / max(n - 1, 1))
             self.steps.add_(1)
-        return x_hat * self.weight + self.bias
+        scale = self.weight * r * inv_std
+        shift = self.bias + self.weight * (d - mean * r * inv_std)
+        return torch.addcmul(shift, x, scale)
 
     def extra_repr(self) -> str:
         return (
