@@ -78,3 +78,12 @@ def test_bad_requests_are_clear_errors(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["run", "dime", "--env", ENV, "--seed", "0", "--seeds", "1", "2"])
     assert "not allowed with argument" in capsys.readouterr().err
+
+
+def test_target_network_ablation_trains_its_seeds_one_after_the_other(tmp_path):
+    over = dict(TINY, total_steps=100_000, use_target_network=True)  # 200 steps
+    together = run_seeds("dime", ENV, [0, 1], "smoke", root=tmp_path / "a", overrides=over,
+                         progress=False)  # fmt: skip
+    alone = run("dime", ENV, 1, "smoke", root=tmp_path / "b", overrides=over, progress=False)
+    assert all(rd.done for rd in together)
+    assert _no_clocks(_rows(together[1])) == _no_clocks(_rows(alone))  # the same loop

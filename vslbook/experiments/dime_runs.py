@@ -24,7 +24,7 @@ from vslbook.budget import Budget, get_budget
 from vslbook.registry import get_algorithm
 from vslbook.results import RunDir, collect_runs, load_table
 from vslbook.srl.dime_config import describe_differences
-from vslbook.training import run
+from vslbook.training import run, run_seeds
 
 
 @dataclass
@@ -111,6 +111,9 @@ def run_variants(
 ) -> VariantRuns:
     """Train every ``{label: (algo, overrides)}`` for ``seeds`` seeds (0 .. seeds-1).
 
+    The seeds of one variant train together in one process where the algorithm can
+    (:func:`vslbook.training.run_seeds`; the same run directories as one seed at a time).
+
     ``common`` (e.g. a named configuration plus run lengths) is applied first, then each
     variant's overrides. The metrics are written by :func:`vslbook.results.collect_runs` to
     ``tables`` and read back through its sha256 check, so the returned table is exactly what
@@ -129,11 +132,18 @@ def run_variants(
     for label, (algo, overrides) in variants.items():
         over = {**(common or {}), **overrides}
         used[label] = (algo, over)
-        for seed in range(seeds):
-            rd = run(
-                algo, env, seed, bud, root=root, overrides=over, progress=progress,
-                reuse_stale=reuse_stale,
+        if seeds > 1 and get_algorithm(algo).train_seeds is not None:  # one process, seed axis
+            rds = run_seeds(
+                algo, env, list(range(seeds)), bud, root=root, overrides=over,
+                progress=progress, reuse_stale=reuse_stale,
             )  # fmt: skip
+        else:
+            rds = [
+                run(algo, env, seed, bud, root=root, overrides=over, progress=progress,
+                    reuse_stale=reuse_stale)
+                for seed in range(seeds)
+            ]  # fmt: skip
+        for rd in rds:
             labels[rd.name] = label
             by_label.setdefault(label, []).append(rd)
     collect_runs([rd for rds in by_label.values() for rd in rds], tables)

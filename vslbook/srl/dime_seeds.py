@@ -13,7 +13,8 @@ directory in the single-seed format, plus the actions of each seed's unfinished 
 on resume the environment is reset with that episode's seed and the actions are replayed
 (the simulators are deterministic), so no simulator state is pickled and an episode may be
 cut anywhere. A seed whose losses or parameters stop being finite is marked FAILED and
-leaves the stack; the others go on.
+leaves the stack; the others go on. Configurations with a target network (an ablation)
+have no seed axis: their seeds are trained one after the other by the single-seed loop.
 """
 
 from __future__ import annotations
@@ -131,6 +132,16 @@ def train_seeds(
     for r in records[1:]:
         if config_from_record(config_cls, r) != cfg or r["env"] != records[0]["env"]:
             raise ValueError("the seeds trained together must share env and configuration")
+    if cfg.use_target_network:  # the target-network ablation: one seed after the other
+        out: list[Any] = []
+        for run, rec in zip(runs, records, strict=True):
+            try:
+                out.append(dime.train(run, rec, budget, progress=progress,
+                                      stop_after=stop_after, config_cls=config_cls))  # fmt: skip
+            except DivergenceError as err:
+                run.mark_failed(err)
+                out.append(err)
+        return out
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     device = resolve_device(cfg.device)
