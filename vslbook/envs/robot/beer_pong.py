@@ -286,9 +286,9 @@ class BeerPong(EpisodicTask):
         applied, ball_q, ball_dq = d.qfrc_applied[:N_DOF], d.qpos[7:10], d.qvel[7:10]
         hand_x, hand_v, vel = d.site_xpos[self._hand], self._vel[3:], self._vel
         step1, step2, objvel = mujoco.mj_step1, mujoco.mj_step2, mujoco.mj_objectVelocity
-        site_type, hand = mujoco.mjtObj.mjOBJ_SITE, self._hand
+        site_type, hand = int(mujoco.mjtObj.mjOBJ_SITE), self._hand  # an int: faster than the enum
         lo, hi = self._table_lo, self._table_hi
-        mul, sub = np.multiply, np.subtract
+        mul, sub, add = np.multiply, np.subtract, np.add
         path = self._recorder
         for k in range(n_total):
             step1(m, d)
@@ -307,12 +307,12 @@ class BeerPong(EpisodicTask):
             balls[k] = ball_q
             if path is not None:
                 path(ball=ball_q)
-            # u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias, with ff = K_p q_d + K_d q̇_d
-            u = torques[k]
-            sub(ff[k], mul(P_GAINS, q, out=tmp), out=u)
-            u -= mul(D_GAINS, dq, out=tmp)
-            u += bias
-            applied[:] = u
+            # u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias, with ff = K_p q_d + K_d q̇_d,
+            # computed in place in qfrc_applied (ufuncs with positional outputs)
+            sub(ff[k], mul(P_GAINS, q, tmp), applied)
+            sub(applied, mul(D_GAINS, dq, tmp), applied)
+            add(applied, bias, applied)
+            torques[k] = applied
             step2(m, d)
         torque_sq = float(np.sum(torques**2))
         self.n_physics_steps += n_total

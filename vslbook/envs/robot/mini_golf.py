@@ -126,6 +126,11 @@ def step_cost(torque: np.ndarray) -> float:
     return -ACTION_COST * float(np.sum(np.square(torque)))
 
 
+def _step_costs(torques: np.ndarray) -> list[float]:
+    """:func:`step_cost` of each row of ``torques`` ``(n, 7)``, as a list of floats."""
+    return (-ACTION_COST * np.sum(np.square(torques), axis=1)).tolist()
+
+
 def final_reward(
     hit: bool,
     passed: bool,
@@ -263,12 +268,17 @@ class MiniGolf(EpisodicTask):
         mujoco.mj_forward(m, d)
 
     def _club_contact(self) -> bool:
+        """Whether a contact of ``data`` pairs the ball with a club geom (a plain loop: the
+        contact list is short, and numpy's set routines cost more than the physics step)."""
         d = self.data
-        if d.ncon == 0:
+        ncon = d.ncon
+        if ncon == 0:
             return False
-        pairs = d.contact.geom[: d.ncon]
-        with_ball = pairs[(pairs == self._ball_geom).any(axis=1)]
-        return bool(np.isin(with_ball, self._club_geoms).any())
+        ball, club = self._ball_geom, self._club_geoms
+        for g1, g2 in d.contact.geom[:ncon].tolist():
+            if (g1 == ball or g2 == ball) and (g1 in club or g2 in club):
+                return True
+        return False
 
     def simulate(
         self,
@@ -301,26 +311,44 @@ class MiniGolf(EpisodicTask):
         path = self._recorder
         if path is not None:
             path(ball=start_ball, club=start_tip)
+        # Views into MjData (its buffers never move) and scratch arrays: the loop allocates
+        # nothing. The PD law, in place and in the order of the module docstring:
+        # a = clip(K_p (q_d - q) + K_d (q̇_d - q̇), -1, 1), u = clip(10 a + bias, ±limit).
+        qpos, q, dq, bias, ctrl = d.qpos, d.qpos[:7], d.qvel[:7], d.qfrc_bias[:7], d.ctrl
+        ball_x, tip_x = d.xpos[self._ball_body], d.site_xpos[self._rod_tip]
+        e, f, neg_max = np.empty(7), np.empty(7), -TORQUE_MAX
+        sub, mul, add, mx, mn = np.subtract, np.multiply, np.add, np.maximum, np.minimum
+        dot = qpos.dot
+        step, sub_steps, club_contact = mujoco.mj_step, range(FRAME_SKIP), self._club_contact
         for t in range(HORIZON):
-            a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
-            torques[t] = ACTION_SCALE * np.clip(a, -1.0, 1.0)
-            d.ctrl[:] = np.clip(torques[t] + d.qfrc_bias[:7], -TORQUE_MAX, TORQUE_MAX)
-            for _ in range(FRAME_SKIP):
-                mujoco.mj_step(m, d)
-                if warnings[bad] > 0 or not np.all(np.isfinite(d.qpos)):
+            mul(P_GAINS, sub(q_d[t + 1], q, e), e)
+            mul(D_GAINS, sub(dq_d[t + 1], dq, f), f)
+            mn(mx(add(e, f, e), -1.0, out=e), 1.0, out=e)  # = np.clip(a, -1, 1)
+            tq = torques[t]
+            mul(ACTION_SCALE, e, tq)
+            mn(mx(add(tq, bias, ctrl), neg_max, out=ctrl), TORQUE_MAX, out=ctrl)
+            for _ in sub_steps:
+                step(m, d)
+                if warnings[bad] > 0:
+                    unstable = True
+                    break
+                # all(isfinite(qpos)) at the cost of a dot product: q·q is finite unless an
+                # entry is not (or the sum overflows, which the exact test then clears)
+                v = dot(qpos)
+                if v - v != 0.0 and not np.all(np.isfinite(qpos)):
                     unstable = True
                     break
                 if not hit:
-                    hit = self._club_contact()
+                    hit = club_contact()
                 elif not passed:
-                    passed = bool(d.xpos[self._ball_body, 1] - BALL_RADIUS < PASS_Y)
-                ball[i] = d.xpos[self._ball_body]
-                tip[i] = d.site_xpos[self._rod_tip]
+                    passed = bool(ball_x[1] - BALL_RADIUS < PASS_Y)
+                ball[i] = ball_x
+                tip[i] = tip_x
                 i += 1
             if unstable:
                 break
             if path is not None:
-                path(ball=d.xpos[self._ball_body], club=d.site_xpos[self._rod_tip])
+                path(ball=ball_x, club=tip_x)
         self.physics_steps += i + int(unstable)  # the unstable substep was taken as well
         if i == 0:  # unstable in the very first substep: the start state is all there is
             ball[0], tip[0], i = start_ball, start_tip, 1
@@ -330,11 +358,15 @@ class MiniGolf(EpisodicTask):
         )  # fmt: skip
 
     def trace_return(self, trace: Trace) -> float:
-        """The episode return of a :class:`Trace` (step costs, then the final reward or −50)."""
+        """The episode return of a :class:`Trace` (step costs, then the final reward or −50).
+
+        The step costs are :func:`step_cost` of every torque row, computed for all rows at
+        once and summed in step order.
+        """
         if trace.unstable:
-            costs = sum(step_cost(tq) for tq in trace.torque[: trace.steps - 1])
+            costs = sum(_step_costs(trace.torque[: trace.steps - 1]))
             return float(costs + UNSTABLE_STEP)
-        costs = sum(step_cost(tq) for tq in trace.torque[: HORIZON - 1])
+        costs = sum(_step_costs(trace.torque[: HORIZON - 1]))
         final = final_reward(
             trace.hit, trace.passed, trace.min_rod_ball, trace.min_ball_goal,
             trace.min_ball_y, self.reward,

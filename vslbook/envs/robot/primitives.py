@@ -103,6 +103,12 @@ class ProDMPSpec:
         τ and the delay are clipped to their bounds here (the validity check uses the
         unclipped values, :meth:`bound_excess`).
         """
+        with torch.inference_mode():  # no autograd bookkeeping: the same numbers, sooner
+            return self._trajectory(theta, q0, dq0)
+
+    def _trajectory(
+        self, theta: np.ndarray, q0: np.ndarray, dq0: np.ndarray | None
+    ) -> tuple[np.ndarray, np.ndarray]:
         q0 = np.asarray(q0, dtype=np.float64).reshape(self.n_dof)
         dq0 = (
             np.zeros(self.n_dof)
@@ -154,9 +160,10 @@ def promp_trajectory(
     """
     weights = np.asarray(weights, dtype=np.float64)
     n_dof, n_basis = weights.shape
-    mp = ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
-    w = torch.from_numpy(weights.reshape(-1))
-    return q0 + mp.trajectory(w).numpy(), mp.velocity(w).numpy()
+    with torch.inference_mode():  # no autograd bookkeeping: the same numbers, sooner
+        mp = ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
+        w = torch.from_numpy(weights.reshape(-1))
+        return q0 + mp.trajectory(w).numpy(), mp.velocity(w).numpy()
 
 
 def _excess(value: float, bounds: tuple[float, float] | None) -> float:

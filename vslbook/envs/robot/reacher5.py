@@ -158,10 +158,18 @@ class ReacherSim:
         self.model = load_model(MODEL_FILE)
         if (self.model.nq, self.model.nu) != (N_LINKS + 2, N_LINKS):
             raise RuntimeError(f"unexpected {MODEL_FILE}: nq={self.model.nq}, nu={self.model.nu}")
+        m = self.model
+        if not (
+            np.all(m.actuator_ctrllimited)
+            and np.array_equal(m.actuator_ctrlrange, np.tile([-1.0, 1.0], (N_LINKS, 1)))
+            and not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CLAMPCTRL
+        ):  # track() leaves the clip of its commands to MuJoCo's ctrl clamping
+            raise RuntimeError(f"{MODEL_FILE}: the motors must clamp ctrl to [-1, 1]")
         self.data = mujoco.MjData(self.model)
         self.physics_steps = 0
         self._qpos = self.data.qpos[:N_LINKS]
         self._qvel = self.data.qvel[:N_LINKS]
+        self._kd = np.full(N_LINKS, KD)
 
     def reset(self, q0: np.ndarray, goal: np.ndarray) -> None:
         """Arm at ``q0`` at rest, target at ``goal``."""
@@ -197,17 +205,18 @@ class ReacherSim:
         n = len(ref)
         qs = np.empty((n + 1, N_LINKS))
         dqs = np.empty((n + 1, N_LINKS))
-        qpos, qvel, ctrl = self._qpos, self._qvel, self.data.ctrl
+        qpos, qvel, ctrl, kd = self._qpos, self._qvel, self.data.ctrl, self._kd
         qs[0], dqs[0] = qpos, qvel
         m, d, step = self.model, self.data, mujoco.mj_step
         kdv = np.empty(N_LINKS)
-        sub, mx, mn, mul = np.subtract, np.maximum, np.minimum, np.multiply
-        for t in range(n):  # the hot loop: in-place ufuncs straight into data.ctrl
-            sub(ref[t], qpos, out=ctrl)  # K_p = 1
-            mul(qvel, KD, out=kdv)
-            sub(ctrl, kdv, out=ctrl)
-            mx(ctrl, -1.0, out=ctrl)
-            mn(ctrl, 1.0, out=ctrl)
+        sub, mul = np.subtract, np.multiply
+        # The hot loop: in-place ufuncs straight into data.ctrl. The clip to [-1, 1] is
+        # MuJoCo's own ctrl clamping (ctrlrange of the motors, checked in __init__), which
+        # gives the physics the same numbers as np.clip; data.ctrl itself stays unclipped.
+        for t in range(n):
+            sub(ref[t], qpos, ctrl)  # K_p = 1
+            mul(kd, qvel, kdv)
+            sub(ctrl, kdv, ctrl)
             step(m, d, FRAME_SKIP)
             qs[t + 1] = qpos
             dqs[t + 1] = qvel

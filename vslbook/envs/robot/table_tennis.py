@@ -158,9 +158,11 @@ def staged_reward(
 def trajectory_penalty(theta: np.ndarray, q_d: np.ndarray) -> float:
     """0 for a valid θ, else the (negative) penalty of the module docstring."""
     d_tau, d_delay = SPEC.bound_excess(theta)
-    high, low = joint_limit_excess(q_d, JOINT_LOW, JOINT_HIGH)
     invalid = d_tau > 0 or d_delay > 0 or np.any(q_d > JOINT_HIGH) or np.any(q_d < JOINT_LOW)
-    return -(3.0 * d_tau + 3.0 * d_delay + high + low) if invalid else 0.0
+    if not invalid:
+        return 0.0
+    high, low = joint_limit_excess(q_d, JOINT_LOW, JOINT_HIGH)
+    return -(3.0 * d_tau + 3.0 * d_delay + high + low)
 
 
 class TableTennis4D(EpisodicTask):
@@ -211,6 +213,7 @@ class TableTennis4D(EpisodicTask):
         ):
             raise RuntimeError("the model's motors must clamp ctrl to [-1, 1]")
         self.sim_steps = 0  # physics sub-steps taken by this instance (tests and benchmarks)
+        self._xs = np.empty((MAX_STEPS * FRAME_SKIP, m.nbody, 3))  # see simulate()
         self._record: list[np.ndarray] | None = None  # qpos per physics step, see strike()
 
     # -- contexts -----------------------------------------------------------------------
@@ -294,9 +297,11 @@ class TableTennis4D(EpisodicTask):
         m, d = self.model, self.data
         self._start(ball0, goal)
 
-        n_sub = MAX_STEPS * FRAME_SKIP
-        xs = np.empty((n_sub, m.nbody, 3))
+        # Every body's position after every sub-step (rows [:i] are this episode's); the
+        # buffer is kept between episodes, so the loop allocates nothing.
+        xs = self._xs
         xpos, qpos, qvel, ctrl = d.xpos, d.qpos, d.qvel, d.ctrl
+        q, dq, tmp = qpos[:7], qvel[:7], np.empty(7)
         warnings, bad = d.warning.number, int(mujoco.mjtWarning.mjWARN_BADQACC)
         # u = K_p q_d + K_d q̇_d - K_p q - K_d q̇; the clip to [-1, 1] is MuJoCo's own ctrl
         # clamping (ctrlrange of the motors, checked in __init__).
@@ -308,14 +313,16 @@ class TableTennis4D(EpisodicTask):
         landed_on_table = False
         i = k = 0
         record, path = self._record, self._recorder
+        step, sub, mul, sub_steps = mujoco.mj_step, np.subtract, np.multiply, range(FRAME_SKIP)
         if path is not None:
             path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
         for k in range(MAX_STEPS):
-            ctrl[:] = feedforward[k] - KP * qpos[:7] - KD * qvel[:7]
-            for _ in range(FRAME_SKIP):
+            sub(feedforward[k], mul(KP, q, tmp), ctrl)  # in place: (K_p q_d + K_d q̇_d - K_p q)
+            sub(ctrl, mul(KD, dq, tmp), ctrl)  # - K_d q̇
+            for _ in sub_steps:
                 if record is not None:  # the state whose positions mj_step leaves in xpos
                     record.append(qpos.copy())
-                mujoco.mj_step(m, d)
+                step(m, d)
                 xs[i] = xpos
                 i += 1
                 if d.ncon:
@@ -331,8 +338,8 @@ class TableTennis4D(EpisodicTask):
                             landing = d.geom_xpos[ball_geom].copy()
                             landed_on_table = floor not in others
                             done = True
-                if done:
-                    break
+                    if done:
+                        break
             if warnings[bad] > 0:  # MuJoCo reset the state after a divergence
                 unstable = True
             elif path is not None:
@@ -341,9 +348,9 @@ class TableTennis4D(EpisodicTask):
                 break
         self.sim_steps += i
         ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
+        d2 = np.sum((ball - racket) ** 2, axis=1)
         if record is not None:  # keep the physics step where ball and racket were closest
-            closest = int(np.argmin(np.sum((ball - racket) ** 2, axis=1)))
-            record[:] = [record[closest]]
+            record[:] = [record[int(np.argmin(d2))]]
         counted = landing if landed_on_table or self.floor_counts_as_landing else None
         dist = float(np.linalg.norm(landing[:2] - goal)) if landing is not None else math.nan
         ret = UNSTABLE_RETURN if unstable else staged_reward(ball, racket, goal, hit, counted)
@@ -356,7 +363,7 @@ class TableTennis4D(EpisodicTask):
             "landing_x": float(landing[0]) if landing is not None else math.nan,
             "landing_y": float(landing[1]) if landing is not None else math.nan,
             "landing_dist": dist,
-            "min_ball_racket_dist": float(np.sqrt(np.min(np.sum((ball - racket) ** 2, axis=1)))),
+            "min_ball_racket_dist": float(np.sqrt(np.min(d2))),
             "unstable": float(unstable),
             "steps": float(k + 1),
         }
