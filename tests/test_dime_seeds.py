@@ -87,3 +87,16 @@ def test_target_network_ablation_trains_its_seeds_one_after_the_other(tmp_path):
     alone = run("dime", ENV, 1, "smoke", root=tmp_path / "b", overrides=over, progress=False)
     assert all(rd.done for rd in together)
     assert _no_clocks(_rows(together[1])) == _no_clocks(_rows(alone))  # the same loop
+
+
+def test_seeds_at_different_steps_train_in_groups(tmp_path):
+    """A seed checkpointed earlier alone and a fresh one: each ends as it would alone."""
+    run("dime", ENV, 1, "smoke", root=tmp_path / "b", overrides=TINY, progress=False,
+        stop_after=150)  # fmt: skip
+    both = run_seeds("dime", ENV, [0, 1], "smoke", root=tmp_path / "b", overrides=TINY,
+                     progress=False)  # fmt: skip
+    alone = run("dime", ENV, 1, "smoke", root=tmp_path / "c", overrides=TINY, progress=False)
+    assert all(rd.done for rd in both)
+    got, want = _rows(both[1])[-1], _rows(alone)[-1]
+    assert got["critic_updates"] == want["critic_updates"]
+    assert got["alpha"] == pytest.approx(want["alpha"], rel=2e-3)

@@ -118,8 +118,8 @@ def run_seeds(
     The directories are those :func:`run` makes for each seed (same names and format):
     finished ones are reused, failed ones left alone, the others trained together (for
     DIME and its variants a seed axis on every tensor, :mod:`vslbook.srl.dime_seeds`),
-    resuming from their checkpoints. Seeds whose checkpoints are at different steps are
-    trained in groups of equal step, one group after the other.
+    resuming from their checkpoints (the algorithm's ``train_seeds`` groups seeds whose
+    checkpoints are at different steps).
     """
     spec = get_algorithm(algo)
     if spec.train_seeds is None:
@@ -134,7 +134,7 @@ def run_seeds(
     bud = get_budget(budget)
     config = config_from_overrides(spec.config, overrides, spec.default_config(env, bud, overrides))
     out: list[RunDir] = []
-    groups: dict[int, list[tuple[RunDir, dict]]] = {}
+    todo: list[tuple[RunDir, dict]] = []
     for seed in seeds:
         record = {"algo": algo, "env": env, "seed": int(seed), "budget": bud.name,
                   **dataclasses.asdict(config)}  # fmt: skip
@@ -145,23 +145,22 @@ def run_seeds(
         if rd.failed:
             warnings.warn(f"run {rd.name} diverged before; not re-run", stacklevel=2)
         elif not rd.done:
-            saved = rd.load_checkpoint()
-            groups.setdefault(0 if saved is None else int(saved["step"]), []).append((rd, record))
+            todo.append((rd, record))
+    if not todo:
+        return out
     import torch
 
     threads = torch.get_num_threads()
+    runs, records = [t[0] for t in todo], [t[1] for t in todo]
     try:
-        for _, group in sorted(groups.items()):
-            runs, records = [g[0] for g in group], [g[1] for g in group]
-            results = spec.train_seeds(runs, records, bud, progress=progress,
-                                       stop_after=stop_after)  # fmt: skip
-            for rd, result in zip(runs, results, strict=True):
-                if isinstance(result, DivergenceError):
-                    warnings.warn(f"run {rd.name} {result}; marked FAILED", stacklevel=2)
-                elif result is not None:
-                    rd.mark_done(result)
+        results = spec.train_seeds(runs, records, bud, progress=progress, stop_after=stop_after)
     finally:
         torch.set_num_threads(threads)
+    for rd, result in zip(runs, results, strict=True):
+        if isinstance(result, DivergenceError):
+            warnings.warn(f"run {rd.name} {result}; marked FAILED", stacklevel=2)
+        elif result is not None:
+            rd.mark_done(result)
     return out
 
 

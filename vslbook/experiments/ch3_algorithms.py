@@ -234,13 +234,10 @@ def _train_baseline(method: str, cls: type, base: type, envs: dict[str, str]):
         config = config_from_record(cls, record)
         task = make_task(task_of(record["env"], envs))
         seed = int(record["seed"])
-        saved = rd.load_checkpoint()
-        done = 0 if saved is None else int(saved["algo"]["iterations_done"])
-        until = None if stop_after is None else done + int(stop_after)
         tests = {"test_every": config.test_every, "test_contexts": config.test_contexts}
         try:
             algo = train_baseline(
-                rd, task, method, _as(base, config), seed, tests, until=until,
+                rd, task, method, _as(base, config), seed, tests, stop_after=stop_after,
                 progress=progress,
             )  # fmt: skip
         finally:

@@ -383,7 +383,7 @@ def train_baseline(
     seed: int,
     extra: dict[str, Any],
     *,
-    until: int | None = None,
+    stop_after: int | None = None,
     workers: int | None = 0,
     progress: bool = False,
 ) -> MixtureAlgorithm:
@@ -392,7 +392,7 @@ def train_baseline(
     Every ``extra["test_every"]`` iterations and at the end, θ ~ π(θ | c) is evaluated on
     ``extra["test_contexts"]`` fixed contexts from p(c) (as :meth:`SVSL.test`); with
     ``extra["entropy_draws"]`` the expected mixture entropy is estimated there too. Stops
-    after iteration ``until`` (default: ``config.iterations``), checkpointing there; the
+    after ``stop_after`` iterations of this call (default: all), checkpointing there; the
     caller marks the run done once ``algo.iterations_done == config.iterations``.
     """
     check_method(method)
@@ -404,7 +404,9 @@ def train_baseline(
     tests = task.sample_contexts(extra["test_contexts"], np.random.default_rng([seed, 1]))
     contexts = entropy_contexts(task.name, extra) if "entropy_draws" in extra else None
     every = extra["test_every"]
-    stop = config.iterations if until is None else min(until, config.iterations)
+    stop = config.iterations
+    if stop_after is not None:
+        stop = min(algo.iterations_done + int(stop_after), stop)
     bar = None
     if progress:
         from tqdm.auto import tqdm

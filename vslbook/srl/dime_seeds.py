@@ -121,10 +121,11 @@ def train_seeds(
 ) -> list[dict | None]:
     """Train the seeds of ``records`` (one run directory each) together, resuming them.
 
-    The records differ only in ``seed``; their checkpoints (if any) must be at the same
-    environment step. Returns per seed a summary when finished, None when stopped early
-    (``stop_after`` environment steps of this call) and the
-    :class:`~vslbook.results.DivergenceError` of a seed that diverged.
+    The records differ only in ``seed``. Seeds whose checkpoints are at the same environment
+    step train as one stack; groups at different steps train one after the other. Returns
+    per seed a summary when finished, None when stopped early (``stop_after`` environment
+    steps of this call) and the :class:`~vslbook.results.DivergenceError` of a seed that
+    diverged.
     """
     if len(runs) != len(records) or not runs:
         raise ValueError(f"need one run directory per record, got {len(runs)} and {len(records)}")
@@ -145,23 +146,37 @@ def train_seeds(
     if cfg.num_threads:
         torch.set_num_threads(cfg.num_threads)
     device = resolve_device(cfg.device)
+    seeds = [_Seed(run, rec, cfg, budget, device) for run, rec in zip(runs, records, strict=True)]
+    groups: dict[int, list[int]] = {}  # checkpoints at different steps: one group per step
+    for i, s in enumerate(seeds):
+        groups.setdefault(s.step, []).append(i)
+    results: list[Any] = [None] * len(seeds)
+    for _, members in sorted(groups.items()):
+        out = _train_group([seeds[i] for i in members], records[0], cfg, budget, device,
+                           progress=progress, stop_after=stop_after)  # fmt: skip
+        for i, result in zip(members, out, strict=True):
+            results[i] = result
+    return results
+
+
+def _train_group(
+    seeds: list[_Seed], record: dict, cfg: DIMEConfig, budget: Budget, device: torch.device, *,
+    progress: bool, stop_after: int | None,
+) -> list[Any]:  # fmt: skip
+    """Algorithm 4 for ``seeds``, all at one environment step, updated as one stack."""
     total_steps = budget.scale(cfg.total_steps)
     learning_starts = min(cfg.learning_starts, total_steps)
     eval_every = dime._scaled(budget, cfg.eval_every)
     checkpoint_every = dime._scaled(budget, cfg.checkpoint_every)
     eval_episodes = cfg.eval_episodes or budget.eval_episodes
-    seeds = [_Seed(run, rec, cfg, budget, device) for run, rec in zip(runs, records, strict=True)]
-    steps = {s.step for s in seeds}
-    if len(steps) != 1:
-        raise ValueError(f"seeds trained together must resume from one step, got {sorted(steps)}")
-    step = steps.pop()
+    step = seeds[0].step
     results: list[Any] = [None] * len(seeds)
     live = list(range(len(seeds)))  # indices of the seeds still training
     stack = SeedStack([s.agent for s in seeds])
     act_dim = seeds[0].env.action_space.shape[0]
-    env_id = records[0]["env"]
+    env_id = record["env"]
     bar = tqdm(total=total_steps, initial=step, disable=not progress,
-               desc=f"{records[0].get('algo', 'dime')} {env_id} seeds "
+               desc=f"{record.get('algo', 'dime')} {env_id} seeds "
                     f"{','.join(str(s.seed) for s in seeds)}")  # fmt: skip
     clock, steps_at_clock = time.perf_counter(), step
     updates_at_clock = seeds[0].updates
