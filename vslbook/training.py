@@ -64,18 +64,8 @@ def run(
     spec = get_algorithm(algo)
     check_run_request(spec, env, seed)  # env id, algorithm support, seed: before any directory
     bud = get_budget(budget)
-    base = spec.default_config(env, bud, overrides)  # a task's preset at this budget, or config()
-    config = config_from_overrides(spec.config, overrides, base)
-    record = {
-        "algo": algo,
-        "env": env,
-        "seed": int(seed),
-        "budget": bud.name,
-        **dataclasses.asdict(config),
-    }
-    rd = RunDir.create(root, record, code_exclude=spec.independent_of)
-    if not rd.code_matches:  # only an existing directory can have been made by other code
-        rd = _stale(rd, root, record, reuse_stale, spec.independent_of)
+    config = _config(spec, env, bud, overrides)
+    rd, record = _open(spec, algo, env, seed, bud, config, root, reuse_stale)
     if rd.failed:
         warnings.warn(
             f"run {rd.name} diverged before ({rd.failure.get('message')}); not re-run. "
@@ -132,15 +122,11 @@ def run_seeds(
     for seed in seeds:
         check_run_request(spec, env, seed)
     bud = get_budget(budget)
-    config = config_from_overrides(spec.config, overrides, spec.default_config(env, bud, overrides))
+    config = _config(spec, env, bud, overrides)
     out: list[RunDir] = []
     todo: list[tuple[RunDir, dict]] = []
     for seed in seeds:
-        record = {"algo": algo, "env": env, "seed": int(seed), "budget": bud.name,
-                  **dataclasses.asdict(config)}  # fmt: skip
-        rd = RunDir.create(root, record, code_exclude=spec.independent_of)
-        if not rd.code_matches:
-            rd = _stale(rd, root, record, reuse_stale, spec.independent_of)
+        rd, record = _open(spec, algo, env, seed, bud, config, root, reuse_stale)
         out.append(rd)
         if rd.failed:
             warnings.warn(f"run {rd.name} diverged before; not re-run", stacklevel=2)
@@ -162,6 +148,26 @@ def run_seeds(
         elif result is not None:
             rd.mark_done(result)
     return out
+
+
+def _config(spec: Any, env: str, bud: Budget, overrides: dict[str, Any] | None) -> Any:
+    """The run's config: the algorithm's preset for ``env`` at ``bud`` (or ``config()``)
+    with ``overrides``."""
+    return config_from_overrides(spec.config, overrides, spec.default_config(env, bud, overrides))
+
+
+def _open(
+    spec: Any, algo: str, env: str, seed: int, bud: Budget, config: Any, root: str | Path,
+    reuse_stale: bool | None,
+) -> tuple[RunDir, dict]:  # fmt: skip
+    """The run directory of (algo, env, seed, budget, config) and its record; one made by
+    other code is moved aside or reused (:func:`_stale`)."""
+    record = {"algo": algo, "env": env, "seed": int(seed), "budget": bud.name,
+              **dataclasses.asdict(config)}  # fmt: skip
+    rd = RunDir.create(root, record, code_exclude=spec.independent_of)
+    if not rd.code_matches:  # only an existing directory can have been made by other code
+        rd = _stale(rd, root, record, reuse_stale, spec.independent_of)
+    return rd, record
 
 
 def _reuse_from_env() -> bool:
