@@ -6,6 +6,10 @@ them; a test calls :meth:`Check.require` or :meth:`CheckReport.require`.
 
 ``foundations``  Chapter 2: soft value iteration, self-paced curricula, mixture gating, the
                  Ornstein-Uhlenbeck forward process, KL chain rules, mutual information
+``svsl``         Chapter 3: the decomposition of SVSL's objective and its per-part lower bounds
+                 (experts, context distributions, weights), the REPS update of the weights
+``diskill``      Chapter 4: the same bounds with energy-based context distributions, their
+                 sample form (Eq. 4.8), the energy normaliser and the gating
 ``dime``         Chapter 5: the entropy lower bound of a diffusion policy and its gap, the soft
                  Bellman contraction, soft policy iteration
 """
