@@ -20,6 +20,7 @@ PLUGIN_MODULES: tuple[str, ...] = (
     "vslbook.erl.pg",
     "vslbook.srl.dime",
     "vslbook.experiments.ch3_algorithms",
+    "vslbook.experiments.ch4_algorithms",
     "vslbook.figures",
 )
 
@@ -128,6 +129,10 @@ ALGORITHM_MODULES: dict[str, str] = {
     "hireps": "vslbook.experiments.ch3_algorithms",
     "ladips": "vslbook.experiments.ch3_algorithms",
     "ppo": "vslbook.experiments.ch3_algorithms",
+    **{
+        name: "vslbook.experiments.ch4_algorithms"
+        for name in ("diskill", "lindiskill", "bbrl", "diskill-v2", "diskill-v3")
+    },
 }
 
 

@@ -1,0 +1,413 @@
+"""Di-SkilL: diverse skills by a curriculum mixture of deep experts (Chapter 4, Algorithms 2 and 3).
+
+The policy is the mixture of Eq. 4.2 with a uniform, fixed prior π(o) = 1/K:
+
+* experts π(θ | c, o) = N(μ_o(c), L_o L_oᵀ): a tanh network per expert for the mean and a
+  context-independent Cholesky factor (Appendix B.3.1;
+  :class:`~vslbook.erl.diskill_nets.GaussianExperts`);
+* per-expert context distributions π(c | o) ∝ exp φ_o(c) (Eq. 4.6), energy networks
+  (:class:`~vslbook.erl.diskill_nets.EnergyNets`);
+* the gating π(o | c) = π(c | o) π(o) / π(c) by Bayes' rule (Algorithm 3).
+
+The curriculum objective 4.3 is split into the per-expert lower bounds 4.4 (experts) and
+4.5 (context distributions) with the responsibilities π̃ of the model before the update
+(Appendix B.1). Each iteration of :func:`train` is Algorithm 2:
+
+1. draw ``env_contexts`` contexts c ~ p(c) (the task's sampler: "resetting the environment");
+2. every expert o draws its ``samples_per_expert`` training contexts from the categorical
+   π(c_i | o) = softmax_i φ_o(c_i) over that batch (with replacement), and one θ per
+   context from π(θ | c, o);
+3. all K·n episodes are run;
+4. the experts are updated on Eq. 4.7 with the trust-region projection layer
+   (:mod:`vslbook.erl.trpl`): ``epochs`` full-batch Adam steps on
+   −E[r A] − α H[π̃] + α_TR m(π ‖ sg(π̃)), r = π̃(θ | c) / π_old(θ | c),
+   A = standardise(R − V_o(c) + α log π̃(o | c, θ)), π̃ the projection of the network's
+   output onto the trust region around the sampling policy; afterwards the expert's
+   covariance is set to its projected value;
+5. the critics V_o(c) regress the returns (``critic_epochs`` full-batch steps);
+6. the energy networks are updated on Eq. 4.8 by PPO: the sampled contexts carry
+   L_c(o, c) ≈ R − b_o + α log π̃(o | c, θ) + α H[π(θ | c, o)] (b_o: the expert's mean
+   return over its last ``reward_baseline_batches`` batches), and the closed-form terms
+   β H[π(·|o)] + (β − α) Σ_i π(c_i | o) log π̃(o | c_i) are summed over all drawn contexts.
+
+All K experts, critics and energy networks are updated together: every parameter has a
+leading expert axis and one loss, the sum of the experts' losses, is differentiated; Adam
+is elementwise and the gradient-norm clip of the energy update is applied per expert, so
+this is K independent updates done in one pass.
+
+The normaliser of π(c | o). The thesis approximates Z_o = ∫ exp φ_o(c) dc by a sum over
+contexts drawn from p(c). The authors' code normalises over whatever batch is at hand (the
+n samples, the 75 test contexts), which makes the gating depend on the batch
+(CH3_CH4_FACTS §2.5). Here Z_o is always a sum over a large batch from p(c): the
+iteration's ``env_contexts`` during training (the categorical the contexts were drawn
+from, also in the PPO ratio), and a fixed batch of ``normaliser_contexts`` per seed at
+evaluation. :func:`vslbook.bounds.diskill.check_gating` shows what batch normalisation
+costs.
+
+Evaluation (Algorithm 3) every ``test_every`` iterations: on fixed contexts from p(c),
+o ~ π(o | c), and the expert's mean θ is executed. Samples are counted as executed
+episodes (an invalid θ is given the task's penalty without simulation and not counted).
+
+BBRL (``curriculum=False``): one expert, contexts straight from p(c), no responsibilities;
+LinDi-SkilL: ``expert_hidden=()``. See :mod:`vslbook.erl.diskill_config`.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+import torch
+
+from vslbook.envs.robot.task import EpisodicTask
+from vslbook.erl import trpl
+from vslbook.erl.diskill_config import DiSkillConfig, diskill_config
+from vslbook.erl.diskill_nets import (
+    EnergyNets,
+    GaussianExperts,
+    ValueCritics,
+    log_gating,
+    log_responsibilities,
+)
+from vslbook.results import DivergenceError
+
+__all__ = ["DiSkill", "DiSkillConfig", "diskill_config", "train"]
+
+Callback = Callable[[int, dict[str, float]], None]
+
+
+def _clip_per_expert(params: list[torch.Tensor], max_norm: float) -> torch.Tensor:
+    """Scale each expert's gradient (leading axis) to norm ≤ ``max_norm``; returns the norms."""
+    sq = sum(p.grad.reshape(p.shape[0], -1).pow(2).sum(1) for p in params if p.grad is not None)
+    norms = torch.as_tensor(sq).sqrt()
+    scale = (max_norm / (norms + 1e-6)).clamp(max=1.0)
+    for p in params:
+        if p.grad is not None:
+            p.grad.mul_(scale.reshape(-1, *([1] * (p.dim() - 1))))
+    return norms
+
+
+def _standardise(x: torch.Tensor) -> torch.Tensor:
+    """Per expert (rows): zero mean, unit standard deviation (+1e-8), as the authors."""
+    return (x - x.mean(1, keepdim=True)) / (x.std(1, keepdim=True) + 1e-8)
+
+
+class DiSkill:
+    """A Di-SkilL model with its optimisers and random streams; one instance per seed.
+
+    Args:
+        task: a Chapter 4 :class:`~vslbook.envs.robot.task.EpisodicTask`.
+        config: :class:`DiSkillConfig` (see :func:`diskill_config`).
+        seed: the seed of the initialisation and of every sample.
+        workers: processes for the episodes (None: ``VSLBOOK_WORKERS`` or the cores).
+    """
+
+    def __init__(
+        self, task: EpisodicTask, config: DiSkillConfig, seed: int, workers: int | None = None
+    ) -> None:
+        self.task, self.config, self.seed, self.workers = task, config, int(seed), workers
+        k, dc, d = config.n_experts, task.context_dim, task.n_params
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(self.seed)
+            self.experts = GaussianExperts(k, dc, d, config.expert_hidden, init_std=config.init_std)
+            self.critics = ValueCritics(k, dc, config.critic_hidden)
+            self.energies = EnergyNets(k, dc, config.context_hidden) if config.curriculum else None
+        self.opt_expert = torch.optim.Adam(self.experts.parameters(), lr=config.lr_policy, eps=1e-8)
+        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=config.lr_critic, eps=1e-8)
+        self.opt_context = (
+            torch.optim.Adam(self.energies.parameters(), lr=config.lr_context, eps=1e-8)
+            if self.energies is not None
+            else None
+        )
+        self.rng = np.random.default_rng([self.seed, 0])  # contexts from p(c)
+        self.gen = torch.Generator().manual_seed(self.seed)  # context indices and θ
+        self.test_contexts = task.sample_contexts(
+            config.test_contexts, np.random.default_rng([self.seed, 1])
+        )
+        self.normaliser_contexts = task.sample_contexts(
+            config.normaliser_contexts, np.random.default_rng([self.seed, 2])
+        )
+        self.reward_history = np.zeros((k, 0))  # the EBM advantage's baseline (last batches)
+        self.iteration = 0
+        self.samples = 0  # executed episodes
+        self.episodes = 0  # all episodes, rejected θ included
+
+    # -- Algorithm 2, lines 2-6 -----------------------------------------------------------
+    def draw_contexts(self) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
+        """Lines 2 and 4: training contexts (K, n, dc), and the batch and indices they came from."""
+        cfg = self.config
+        n = cfg.samples_per_expert
+        if self.energies is None:  # BBRL: contexts from p(c)
+            c = torch.as_tensor(self.task.sample_contexts(n, self.rng))
+            return c[None], None, None
+        c_env = torch.as_tensor(self.task.sample_contexts(cfg.env_contexts, self.rng))  # line 2
+        with torch.no_grad():
+            probs = torch.softmax(self.energies.energies(c_env), dim=-1)  # π(c_i|o), Eq. 4.6
+        idx = torch.multinomial(probs, n, replacement=True, generator=self.gen)  # line 4
+        return c_env[idx], c_env, idx
+
+    def collect(self) -> dict[str, Any]:
+        """Lines 2-6: contexts, θ ~ π(θ | c, o), episodes, and what the updates need."""
+        cfg, task = self.config, self.task
+        k, n = cfg.n_experts, cfg.samples_per_expert
+        ctx, c_env, idx = self.draw_contexts()
+        with torch.no_grad():
+            theta, mean_old = self.experts.sample(ctx, self.gen)  # line 5
+            chol_old = self.experts.chol().clone()
+        roll = task.evaluate(  # line 6
+            theta.reshape(k * n, -1).numpy(), ctx.reshape(k * n, -1).numpy(), workers=self.workers
+        )
+        batch = {
+            "ctx": ctx, "theta": theta, "mean_old": mean_old, "chol_old": chol_old,
+            "returns": torch.as_tensor(roll.returns).reshape(k, n), "c_env": c_env, "idx": idx,
+            "success": roll.success.reshape(k, n), "executed": roll.executed.reshape(k, n),
+        }  # fmt: skip
+        batch |= self._responsibilities(batch)
+        self.samples += roll.n_executed
+        self.episodes += k * n
+        return batch
+
+    def _responsibilities(self, b: dict[str, Any]) -> dict[str, torch.Tensor]:
+        """log π̃(o | c, θ) of the samples, log π̃(o | c_i) on the drawn contexts (Appendix B.1)."""
+        cfg = self.config
+        k, n = cfg.n_experts, cfg.samples_per_expert
+        zeros = torch.zeros(k, n, dtype=torch.float64)
+        if self.energies is None or k == 1:
+            return {"log_resp": zeros, "log_gate_env": None}
+        with torch.no_grad():
+            log_z = torch.logsumexp(self.energies.energies(b["c_env"]), dim=-1)  # (K,)
+            log_pc = self.energies.energies(b["ctx"].reshape(k * n, -1)) - log_z[:, None]
+            log_resp = log_responsibilities(
+                b["theta"], b["ctx"], self.experts, log_pc.reshape(k, k, n)
+            )
+            log_gate_env = None
+            if cfg.context_responsibilities:
+                log_pc_env = self.energies.energies(b["c_env"]) - log_z[:, None]
+                log_gate_env = log_gating(log_pc_env)  # (K, N)
+        return {"log_resp": log_resp, "log_gate_env": log_gate_env}
+
+    # -- line 7: experts, Eq. 4.7 -----------------------------------------------------------
+    def update_experts(self, b: dict[str, Any]) -> dict[str, float]:
+        """Trust-region policy gradient on Eq. 4.7, all experts at once; then the critics."""
+        cfg = self.config
+        ctx, theta, mean_old, chol_old = b["ctx"], b["theta"], b["mean_old"], b["chol_old"]
+        with torch.no_grad():
+            adv = _standardise(b["returns"] - self.critics.values(ctx) + cfg.alpha * b["log_resp"])
+            logp_old = self.experts.log_prob(theta, mean_old, chol_old)
+        for _ in range(cfg.epochs):
+            mean, chol = self.experts.mean(ctx), self.experts.chol()
+            p_mean, p_chol = trpl.project(
+                mean, chol, mean_old, chol_old, cfg.mean_bound, cfg.cov_bound
+            )
+            ratio = torch.exp(self.experts.log_prob(theta, p_mean, p_chol) - logp_old)
+            loss = (
+                -(ratio * adv).mean(1)
+                - cfg.alpha * self.experts.entropy(p_chol)
+                + cfg.trust_region_coeff * trpl.trust_region_loss(mean, p_mean, p_chol)
+            ).sum()
+            self.opt_expert.zero_grad()
+            loss.backward()
+            self.opt_expert.step()
+        with torch.no_grad():  # the covariance becomes its projection
+            p_mean, p_chol = trpl.project(
+                self.experts.mean(ctx), self.experts.chol(), mean_old, chol_old,
+                cfg.mean_bound, cfg.cov_bound,
+            )  # fmt: skip
+            self.experts.set_chol(p_chol)
+            kl_mean, kl_cov = trpl.kl_parts(
+                self.experts.mean(ctx), self.experts.chol(), mean_old, chol_old
+            )
+        for _ in range(cfg.critic_epochs):  # line 7: V_o(c) regresses R
+            v_loss = (self.critics.values(ctx) - b["returns"]).pow(2).mean(1).sum()
+            self.opt_critic.zero_grad()
+            v_loss.backward()
+            self.opt_critic.step()
+        self._check_finite("expert or critic parameters", self.experts, self.critics)
+        return {
+            "expert_loss": loss.item() / cfg.n_experts,
+            "critic_loss": v_loss.item() / cfg.n_experts,
+            "kl_mean": float(kl_mean.mean()),
+            "kl_cov": float(kl_cov.mean()),
+            "expert_entropy": self.experts.entropy(self.experts.chol()).mean().item(),
+        }
+
+    # -- line 8: context distributions, Eq. 4.8 ----------------------------------------------
+    def update_contexts(self, b: dict[str, Any], entropy_old: torch.Tensor) -> dict[str, float]:
+        """PPO on the sample form Eq. 4.8 of the context bound 4.5, all energy networks at once."""
+        cfg = self.config
+        assert self.energies is not None and self.opt_context is not None
+        returns = b["returns"].numpy()
+        self.reward_history = np.concatenate([self.reward_history, returns], axis=1)
+        self.reward_history = self.reward_history[
+            :, -cfg.reward_baseline_batches * returns.shape[1] :
+        ]
+        baseline = torch.as_tensor(self.reward_history.mean(axis=1))
+        # L_c(o, c) of Eq. 4.5 with one θ per context, less a per-expert constant baseline
+        adv = (
+            b["returns"] - baseline[:, None] + cfg.alpha * b["log_resp"]
+            + cfg.alpha * entropy_old[:, None]
+        )  # fmt: skip
+        c_env, idx = b["c_env"], b["idx"]
+        gate = b["log_gate_env"]
+        with torch.no_grad():
+            logp_old = torch.log_softmax(self.energies.energies(c_env), -1).gather(1, idx)
+        params = list(self.energies.parameters())
+        for _ in range(cfg.context_epochs):
+            logp = torch.log_softmax(self.energies.energies(c_env), -1)  # (K, N)
+            ratio = torch.exp(logp.gather(1, idx) - logp_old)
+            clipped = ratio.clamp(1 - cfg.context_clip, 1 + cfg.context_clip)
+            surrogate = torch.minimum(ratio * adv, clipped * adv).mean(1)
+            p = logp.exp()
+            entropy = -(p * logp).sum(1)  # H[π(·|o)] over the drawn contexts
+            resp = (p * gate).sum(1) if gate is not None else torch.zeros_like(entropy)
+            loss = (-surrogate - cfg.beta * entropy - (cfg.beta - cfg.alpha) * resp).sum()
+            self.opt_context.zero_grad()
+            loss.backward()
+            _clip_per_expert(params, cfg.context_grad_clip)
+            self.opt_context.step()
+        self._check_finite("energy-network parameters", self.energies)
+        return {
+            "context_loss": loss.item() / cfg.n_experts,
+            "context_entropy": entropy.mean().item(),
+        }
+
+    def _check_finite(self, what: str, *modules: torch.nn.Module) -> None:
+        for m in modules:
+            for p in m.parameters():
+                if not torch.isfinite(p).all():
+                    raise DivergenceError(self.iteration + 1, what)
+
+    # -- Algorithm 3 -------------------------------------------------------------------------
+    def choose_experts(self, contexts: np.ndarray, generator: torch.Generator) -> np.ndarray:
+        """o ~ π(o | c) per context (Algorithm 3, line 2; Z_o over the fixed normaliser batch)."""
+        c = torch.as_tensor(contexts)
+        if self.energies is None or self.config.n_experts == 1:
+            return np.zeros(len(c), dtype=np.int64)
+        with torch.no_grad():
+            log_z = torch.logsumexp(
+                self.energies.energies(torch.as_tensor(self.normaliser_contexts)), dim=-1
+            )
+            gate = log_gating(self.energies.energies(c) - log_z[:, None]).exp()  # (K, M)
+        return torch.multinomial(gate.T, 1, generator=generator)[:, 0].numpy()
+
+    def mean_parameters(self, contexts: np.ndarray, experts: np.ndarray) -> np.ndarray:
+        """The chosen experts' mean θ at each context: (M, n_params)."""
+        c = torch.as_tensor(contexts)
+        k = self.config.n_experts
+        with torch.no_grad():
+            means = self.experts.mean(c[None].expand(k, -1, -1))  # (K, M, d)
+        return means[torch.as_tensor(experts), torch.arange(len(c))].numpy()
+
+    def test(self) -> dict[str, float]:
+        """Algorithm 3 on the fixed test contexts with the experts' means."""
+        gen = torch.Generator().manual_seed(self.seed * 1_000_003 + self.iteration)
+        o = self.choose_experts(self.test_contexts, gen)
+        theta = self.mean_parameters(self.test_contexts, o)
+        roll = self.task.evaluate(theta, self.test_contexts, workers=self.workers)
+        out = {
+            "test_return": float(roll.returns.mean()),
+            "test_executed": float(roll.executed.mean()),
+        }
+        if self.task.has_success:
+            out["test_success"] = float(roll.success.mean())
+        out["test_experts_used"] = float(len(np.unique(o)))
+        return out
+
+    # -- one iteration of Algorithm 2 ---------------------------------------------------------
+    def iterate(self) -> dict[str, float]:
+        """Lines 2-8 for every expert, batched."""
+        t0 = time.perf_counter()
+        b = self.collect()
+        with torch.no_grad():
+            entropy_old = self.experts.entropy(b["chol_old"])
+        metrics = {
+            "mean_return": float(b["returns"].mean()),
+            "rejected": float((~b["executed"]).mean()),
+        }
+        if self.task.has_success:
+            metrics["success"] = float(b["success"].mean())
+        metrics |= self.update_experts(b)
+        if self.energies is not None:
+            metrics |= self.update_contexts(b, entropy_old)
+        self.iteration += 1
+        metrics |= {
+            "samples": self.samples, "episodes": self.episodes,
+            "iteration_seconds": time.perf_counter() - t0,
+        }  # fmt: skip
+        return metrics
+
+    # -- checkpoints ---------------------------------------------------------------------------
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "experts": self.experts.state_dict(),
+            "critics": self.critics.state_dict(),
+            "energies": self.energies.state_dict() if self.energies is not None else None,
+            "opt_expert": self.opt_expert.state_dict(),
+            "opt_critic": self.opt_critic.state_dict(),
+            "opt_context": self.opt_context.state_dict() if self.opt_context is not None else None,
+            "rng": self.rng.bit_generator.state,
+            "gen": self.gen.get_state(),
+            "reward_history": self.reward_history,
+            "iteration": self.iteration,
+            "samples": self.samples,
+            "episodes": self.episodes,
+        }
+
+    def load_state_dict(self, state: dict[str, Any]) -> None:
+        self.experts.load_state_dict(state["experts"])
+        self.critics.load_state_dict(state["critics"])
+        self.opt_expert.load_state_dict(state["opt_expert"])
+        self.opt_critic.load_state_dict(state["opt_critic"])
+        if self.energies is not None:
+            self.energies.load_state_dict(state["energies"])
+            self.opt_context.load_state_dict(state["opt_context"])  # type: ignore[union-attr]
+        self.rng.bit_generator.state = state["rng"]
+        self.gen.set_state(state["gen"])
+        self.reward_history = np.asarray(state["reward_history"], dtype=np.float64)
+        self.iteration = int(state["iteration"])
+        self.samples = int(state["samples"])
+        self.episodes = int(state["episodes"])
+
+
+def train(
+    task: EpisodicTask,
+    config: DiSkillConfig,
+    seed: int,
+    *,
+    state: DiSkill | None = None,
+    until: int | None = None,
+    callback: Callback | None = None,
+    checkpoint: Callable[[DiSkill], None] | None = None,
+    checkpoint_every: int = 25,
+    workers: int | None = None,
+) -> DiSkill:
+    """Algorithm 2, resumable: continue ``state`` if given.
+
+    Args:
+        task: a Chapter 4 task.
+        config: :class:`DiSkillConfig`.
+        seed: the run's seed.
+        state: a :class:`DiSkill` to continue (e.g. restored from a checkpoint).
+        until: stop after this many iterations in total (default: ``config.iterations``).
+        callback: ``callback(iteration, metrics)`` after every iteration (with the
+            evaluation's numbers every ``test_every`` iterations and after the last).
+        checkpoint: ``checkpoint(model)`` every ``checkpoint_every`` iterations and at the end.
+    """
+    s = state if state is not None else DiSkill(task, config, seed, workers)
+    cfg = s.config
+    stop = cfg.iterations if until is None else min(until, cfg.iterations)
+    if s.iteration == 0 and stop > 0 and callback is not None:
+        callback(0, {"samples": 0, "episodes": 0} | s.test())  # the initial policy
+        if checkpoint is not None:
+            checkpoint(s)
+    while s.iteration < stop:  # line 1
+        metrics = s.iterate()  # lines 2-8
+        if s.iteration % cfg.test_every == 0 or s.iteration == cfg.iterations:
+            metrics |= s.test()
+        if callback is not None:
+            callback(s.iteration, metrics)
+        if checkpoint is not None and (s.iteration % checkpoint_every == 0 or s.iteration == stop):
+            checkpoint(s)
+    return s

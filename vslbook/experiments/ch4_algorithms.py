@@ -1,0 +1,124 @@
+"""Chapter 4's algorithms as ``vslbook run`` / ``vslbook sweep`` entries.
+
+    vslbook run diskill    --env vslbook/Reacher5-v0 --seed 0 --budget reduced
+    vslbook run bbrl       --env vslbook/BoxPushingObstacle-v0 --budget full
+    vslbook run lindiskill --env vslbook/MiniGolf-v0 --set n_experts=5
+    vslbook run diskill-v2 --env vslbook/TableTennis4D-v0
+
+Registered here: ``diskill`` (Algorithm 2), ``lindiskill`` (linear experts), ``bbrl`` (one
+deep Gaussian with the same trust-region projection) and ``diskill-v2`` / ``diskill-v3``
+(the curriculum ablation of Fig. 4.3b, table tennis only). A run's configuration is
+:func:`vslbook.erl.diskill_config.diskill_config` of the env's task with the budget's share
+of the iterations (:func:`iterations`); like Chapter 3's, these configs hold the counts
+themselves, so ``--set iterations=10`` means ten iterations at any budget.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+from vslbook.budget import Budget
+from vslbook.erl.diskill_config import DiSkillConfig, diskill_config
+from vslbook.registry import config_from_record, register_algorithm
+from vslbook.results import RunDir
+
+__all__ = ["DISKILL_ENVS", "DiSkillRun", "iterations", "task_of"]
+
+#: one-step env id → task name, for every Chapter 4 task with a Di-SkilL preset.
+DISKILL_ENVS = {
+    "vslbook/TableTennis4D-v0": "table-tennis-4d",
+    "vslbook/Reacher5-v0": "reacher5",
+    "vslbook/TableTennisHard-v0": "table-tennis-hard",
+    "vslbook/HopperJump-v0": "hopper-jump",
+    "vslbook/BoxPushingObstacle-v0": "box-pushing-obstacle",
+    "vslbook/MiniGolf-v0": "mini-golf",
+}
+LINDI_ENVS = {k: v for k, v in DISKILL_ENVS.items() if v != "table-tennis-4d"}
+ABLATION_ENVS = {"vslbook/TableTennis4D-v0": "table-tennis-4d"}
+
+
+@dataclass(frozen=True)
+class DiSkillRun(DiSkillConfig):
+    """:class:`DiSkillConfig` as a run records it (the method is the algorithm's name)."""
+
+
+def task_of(env: str, table: dict[str, str]) -> str:
+    """The task name of ``env``, or a clear error listing the ids ``table`` knows."""
+    if env not in table:
+        raise ValueError(f"env {env!r} has no Chapter 4 preset; expected one of {sorted(table)}")
+    return table[env]
+
+
+def iterations(task: str, method: str, budget: Budget) -> int:
+    """The budget's share of the thesis's iterations (at least 2)."""
+    return budget.scale(diskill_config(task, method).iterations, minimum=2)
+
+
+def _defaults(method: str, envs: dict[str, str]):
+    def defaults(env: str, budget: Budget, overrides: dict) -> DiSkillRun:
+        task = task_of(env, envs)
+        cfg = diskill_config(task, method, iterations=iterations(task, method, budget))
+        return DiSkillRun(**asdict(cfg))
+
+    defaults.__doc__ = f"{method}'s configuration of ``env`` at ``budget`` (Tables B.2-B.7)."
+    return defaults
+
+
+def _train(method: str, envs: dict[str, str]):
+    def train(
+        rd: RunDir, record: dict, budget: Budget, *, progress: bool = True,
+        stop_after: int | None = None,
+    ) -> dict | None:  # fmt: skip
+        from tqdm.auto import tqdm
+
+        from vslbook.envs.robot import make_task
+        from vslbook.erl.diskill import DiSkill
+        from vslbook.erl.diskill import train as train_loop
+
+        config = config_from_record(DiSkillRun, record)
+        task_name = task_of(record["env"], envs)
+        seed = int(record["seed"])
+        task = make_task(task_name)
+        try:
+            s = DiSkill(task, config, seed)
+            saved = rd.load_checkpoint()
+            if saved is not None:
+                s.load_state_dict(saved["diskill"])
+            until = None if stop_after is None else s.iteration + int(stop_after)
+            with tqdm(total=config.iterations, initial=s.iteration, disable=not progress,
+                      desc=f"{method} {task_name} s{seed}") as bar:  # fmt: skip
+
+                def log(it: int, metrics: dict[str, float]) -> None:
+                    rd.log(it, **metrics)
+                    bar.update(1 if it > 0 else 0)
+
+                train_loop(
+                    task, config, seed, state=s, until=until, callback=log,
+                    checkpoint=lambda st: rd.save_checkpoint({"diskill": st.state_dict()}),
+                )  # fmt: skip
+        finally:
+            task.close()
+        if s.iteration < config.iterations:
+            return None
+        return {"samples": s.samples, "episodes": s.episodes, "iterations": s.iteration}
+
+    train.__doc__ = f"{method} (Algorithm 2) for ``record`` in ``rd``; None if stopped early."
+    return train
+
+
+_SCOPE = ("srl/",)  # no Chapter 4 run imports DIME's code
+
+for _name, _envs, _doc in (
+    ("diskill", DISKILL_ENVS, "Di-SkilL (Ch. 4, Algorithm 2): deep experts with energy-based "
+     "per-expert context distributions and trust-region projections; Tables B.2-B.7"),
+    ("lindiskill", LINDI_ENVS, "LinDi-SkilL: Di-SkilL with linear experts; Tables B.3-B.7"),
+    ("bbrl", DISKILL_ENVS, "BBRL (Otto et al., 2023): one deep Gaussian policy with the "
+     "trust-region projection, contexts from p(c); Tables B.2-B.7"),
+    ("diskill-v2", ABLATION_ENVS, "Di-SkilLV2 (Fig. 4.3b): no curriculum (log π̃(o|c) = 0, "
+     "β = 2000), 5 experts"),
+    ("diskill-v3", ABLATION_ENVS, "Di-SkilLV3 (Fig. 4.3b): as V2 with 260 samples per expert"),
+):  # fmt: skip
+    register_algorithm(
+        _name, train=_train(_name, _envs), config=DiSkillRun, envs=tuple(_envs),
+        defaults=_defaults(_name, _envs), independent_of=_SCOPE, doc=_doc,
+    )  # fmt: skip
