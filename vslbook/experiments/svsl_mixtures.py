@@ -468,19 +468,22 @@ def load_model(path: str | Path) -> Any:
 # curves over executed episodes (Fig. 3.2a/b, Figs. A.1, A.2)
 # --------------------------------------------------------------------------------------
 def curve_frame(
-    runs: dict[str, list[str | Path]], y: str = "test_return", points: int = 40
+    runs: dict[str, list[str | Path]],
+    y: str = "test_return",
+    points: int = 40,
+    methods: Sequence[str] = METHODS,
 ) -> pd.DataFrame:
     """Long frame (method, run, samples, ``y``) with every run on one grid of episode counts.
 
     Each run's test rows (``y`` against executed episodes ``samples``) are linearly
     interpolated onto ``points`` counts spanning all runs; a run contributes only inside
-    its own range (no extrapolation).
+    its own range (no extrapolation). ``methods``: the names ``runs`` may use.
     """
     if not runs:
         raise ValueError("runs is empty; expected {method: [run directories]}")
-    unknown = [m for m in runs if m not in METHODS]
+    unknown = [m for m in runs if m not in methods]
     if unknown:
-        raise ValueError(f"unknown method(s) {unknown}; expected some of {METHODS}")
+        raise ValueError(f"unknown method(s) {unknown}; expected some of {tuple(methods)}")
     tables = []
     for method, paths in runs.items():
         for j, path in enumerate(paths):
@@ -507,10 +510,12 @@ def learning_curves(
     points: int = 40,
     reps: int | None = None,
     seed: int = 0,
+    methods: Sequence[str] = METHODS,
 ) -> pd.DataFrame:
     """IQM and 95 % stratified-bootstrap CI over seeds per method (Fig. 3.2a/b; Figs. A.1,
-    A.2 with ``y="expected_entropy"``): columns method, samples, iqm, lo, hi, n_runs."""
-    frame = curve_frame(runs, y, points)
+    A.2 with ``y="expected_entropy"``; Chapter 4's curves with their ``methods``): columns
+    method, samples, iqm, lo, hi, n_runs."""
+    frame = curve_frame(runs, y, points, methods)
     return iqm_curve(frame, x="samples", y=y, run="run", group="method", reps=reps, seed=seed)
 
 

@@ -1,0 +1,84 @@
+"""Chapter 4's run sets, curves and the 5LR analysis of Fig. 4.2 (at the smoke budget)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict
+
+import matplotlib
+
+matplotlib.use("Agg")
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+
+from vslbook.erl.diskill_config import diskill_config
+from vslbook.experiments import diskill_reacher as R
+from vslbook.experiments import diskill_runs as D
+
+
+def test_counts_scale_only_counts():
+    full, red, smoke = (D.counts("reacher5", "diskill", b) for b in ("full", "reduced", "smoke"))
+    assert full == {"seeds": 24, "iterations": 3000, "test_every": 5, "test_contexts": 75}
+    assert red["iterations"] == 150 and red["seeds"] == 3
+    assert smoke["n_experts"] == 2 and smoke["samples_per_expert"] == 4
+    assert D.counts("hopper-jump", "bbrl", "reduced")["iterations"] == 70
+
+
+def test_bad_input():
+    with pytest.raises(ValueError, match="unknown figure '4.9'"):
+        D.run_set("4.9", "smoke")
+    with pytest.raises(ValueError, match="no method 'lindiskill'"):
+        D.run_set("4.3b", "smoke", methods=("lindiskill",))
+    with pytest.raises(ValueError, match="task 'beer-pong'"):
+        D.env_id("beer-pong")
+    with pytest.raises(ValueError, match="n must be an integer >= 2"):
+        R.disk_grid(1)
+
+
+@pytest.fixture(scope="module")
+def reacher_runs(tmp_path_factory):
+    import os
+
+    os.environ["VSLBOOK_WORKERS"] = "1"
+    return D.run_set("4.3c", "smoke", tmp_path_factory.mktemp("runs"))
+
+
+def test_run_set_and_curves(reacher_runs):
+    assert set(reacher_runs) == {"diskill", "bbrl", "lindiskill"}
+    curves = D.curves(reacher_runs, reps=50)
+    assert set(curves["method"]) == {"Di-SkilL", "BBRL", "LinDi-SkilL"}
+    assert np.isfinite(curves["iqm"]).all()
+    # at smoke every method draws 4 samples per expert: BBRL 1 x 4, Di-SkilL 2 x 4 per iteration
+    bbrl = curves[curves["method"] == "BBRL"]["samples"].max()
+    dis = curves[curves["method"] == "Di-SkilL"]["samples"].max()
+    assert bbrl == 2 * 4 and dis == 2 * 2 * 4
+
+
+def test_fig_4_2_analysis(reacher_runs):
+    model = D.load_model(reacher_runs["diskill"][0])
+    assert model.iteration == 2 and model.config.n_experts == 2
+    grid = R.disk_grid(11)
+    assert (np.hypot(grid[:, 0], grid[:, 1]) <= 0.5).all() and len(grid) > 60
+    pref = R.log_preference(model, grid)
+    assert pref.shape == (2, len(grid))
+    # log π(c|o) − log p(c) integrates to one over p(c): mean of exp over p(c) samples ≈ 1
+    c = model.task.sample_contexts(4000, np.random.default_rng(7))
+    np.testing.assert_allclose(np.exp(R.log_preference(model, c)).mean(1), 1.0, atol=0.05)
+    n = R.active_experts(model, grid)
+    assert n.shape == (len(grid),) and n.min() >= 0 and n.max() <= 2
+    reaches = R.reaches(model, np.array([0.2, 0.3]))
+    assert [r["expert"] for r in reaches] == [0, 1]
+    assert abs(sum(r["gating"] for r in reaches) - 1) < 1e-9
+    assert all(r["tip"].shape == (201, 3) for r in reaches)
+    fig, axes = plt.subplots(1, 3)
+    R.draw_context_regions(axes[0], model, grid)
+    R.draw_active_experts(axes[1], model, grid)
+    R.draw_reaches(axes[2], model, np.array([[0.2, 0.3], [-0.3, -0.1]]))
+    plt.close(fig)
+    bbrl = D.load_model(reacher_runs["bbrl"][0])
+    with pytest.raises(ValueError, match="BBRL"):
+        R.log_preference(bbrl, grid)
+    expected = diskill_config("reacher5", "bbrl", iterations=2, test_every=1, test_contexts=10,
+                              n_experts=1, samples_per_expert=4)  # fmt: skip
+    assert asdict(bbrl.config) == asdict(expected)

@@ -1,0 +1,136 @@
+"""Chapter 4's run sets at a budget and their learning curves (Figs. 4.3b, 4.3c, 4.4).
+
+Each figure of Chapter 4 compares methods on one task (:data:`FIGURES`). :func:`counts`
+gives what a budget changes (seeds, iterations, evaluation points; at ``smoke`` also the
+experts and samples per expert, a "does it run" setting); every other number is the
+thesis's (:func:`vslbook.erl.diskill_config.diskill_config`, Tables B.2-B.7).
+:func:`run_set` trains the runs through :func:`vslbook.training.run` (the directories
+``vslbook run`` makes, resumable, reused when finished) and :func:`curves` turns their test
+rows into IQM curves with 95 % stratified-bootstrap intervals over seeds.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from vslbook.budget import Budget, get_budget
+from vslbook.erl.diskill_config import diskill_config
+from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
+
+__all__ = ["FIGURES", "LABELS", "counts", "curves", "env_id", "load_model", "run_set"]
+
+#: figure → (task, methods) as in the thesis (PPO runs separately, step-based).
+FIGURES: dict[str, tuple[str, tuple[str, ...]]] = {
+    "4.3b": ("table-tennis-4d", ("diskill", "bbrl", "diskill-v2", "diskill-v3")),
+    "4.3c": ("reacher5", ("diskill", "bbrl", "lindiskill")),
+    "4.4a": ("hopper-jump", ("diskill", "bbrl", "lindiskill")),
+    "4.4b": ("box-pushing-obstacle", ("diskill", "bbrl", "lindiskill")),
+    "4.4c": ("table-tennis-hard", ("diskill", "bbrl", "lindiskill")),
+    "4.4d": ("mini-golf", ("diskill", "bbrl", "lindiskill")),
+}
+#: method → the label of the thesis's figures.
+LABELS = {
+    "diskill": "Di-SkilL", "bbrl": "BBRL", "lindiskill": "LinDi-SkilL",
+    "diskill-v2": "Di-SkilLV2", "diskill-v3": "Di-SkilLV3",
+}  # fmt: skip
+
+
+def env_id(task: str) -> str:
+    """The one-step gymnasium id of a Chapter 4 task."""
+    for env, name in DISKILL_ENVS.items():
+        if name == task:
+            return env
+    raise ValueError(
+        f"task {task!r} has no Di-SkilL preset; expected one of {sorted(DISKILL_ENVS.values())}"
+    )
+
+
+def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[str, Any]:
+    """What a budget sets for ``method`` on ``task`` (the rest is the thesis's).
+
+    * full: the thesis's iterations, its 24 seeds (Section 4.5.3; Fig. 4.3b: "at least 4",
+      we use 24 there too), evaluation every 5 iterations on 75 contexts (the authors');
+    * reduced: 5 % of the iterations (at least 20), 3 seeds, evaluation every 5 iterations;
+    * smoke ("does it run"): 2 iterations of at most 2 experts with 4 samples each,
+      1 seed, evaluation after each iteration on 10 contexts.
+    """
+    b = get_budget(budget)
+    cfg = diskill_config(task, method)
+    out: dict[str, Any] = {
+        "seeds": b.pick(smoke=1, reduced=3, full=24),
+        "iterations": b.pick(
+            smoke=2, reduced=max(20, b.scale(cfg.iterations)), full=cfg.iterations
+        ),
+        "test_every": b.pick(smoke=1, reduced=5, full=5),
+        "test_contexts": b.pick(smoke=10, reduced=75, full=75),
+    }
+    if b.name == "smoke":
+        out["n_experts"] = min(cfg.n_experts, 2)
+        out["samples_per_expert"] = 4
+    return out
+
+
+def run_set(
+    figure: str,
+    budget: Budget | str | None = None,
+    root: str | Path = "runs",
+    *,
+    methods: tuple[str, ...] | None = None,
+    progress: bool = False,
+) -> dict[str, list[Path]]:
+    """Train (or reuse) every run of ``figure`` at ``budget``: method → run directories."""
+    from vslbook.training import run
+
+    if figure not in FIGURES:
+        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(FIGURES)}")
+    task, figure_methods = FIGURES[figure]
+    b = get_budget(budget)
+    out: dict[str, list[Path]] = {}
+    for method in methods or figure_methods:
+        if method not in figure_methods:
+            raise ValueError(f"figure {figure} has no method {method!r}; expected {figure_methods}")
+        c = counts(task, method, b)
+        overrides = {k: v for k, v in c.items() if k != "seeds"}
+        dirs = []
+        for seed in range(c["seeds"]):
+            rd = run(method, env_id(task), seed, b, root=root, overrides=overrides,
+                     progress=progress)  # fmt: skip
+            if rd.failed:
+                raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
+            dirs.append(rd.path)
+        out[method] = dirs
+    return out
+
+
+def curves(
+    runs: dict[str, list[Path]], y: str = "test_return", *, reps: int | None = None
+) -> pd.DataFrame:
+    """IQM over seeds with 95 % stratified-bootstrap CIs of ``y`` against executed episodes,
+    one row per (method label, grid point)."""
+    from vslbook.experiments.svsl_mixtures import learning_curves
+
+    labelled = {LABELS[m]: v for m, v in runs.items()}
+    return learning_curves(labelled, y, reps=reps, methods=tuple(LABELS.values()))
+
+
+def load_model(path: str | Path) -> Any:
+    """The trained :class:`~vslbook.erl.diskill.DiSkill` of a run directory (last checkpoint)."""
+    from vslbook.envs.robot import make_task
+    from vslbook.erl.diskill import DiSkill
+    from vslbook.experiments.ch4_algorithms import DiSkillRun
+    from vslbook.registry import config_from_record
+    from vslbook.results import RunDir
+
+    rd = RunDir.open(path)
+    record = rd.config
+    config = config_from_record(DiSkillRun, record)
+    task = make_task(DISKILL_ENVS[record["env"]])
+    model = DiSkill(task, config, int(record["seed"]), workers=0)
+    saved = rd.load_checkpoint()
+    if saved is None:
+        raise FileNotFoundError(f"{rd.path} has no checkpoint to load")
+    model.load_state_dict(saved["diskill"])
+    return model
