@@ -22,7 +22,10 @@ def test_counts_scale_only_counts():
     assert full == {"seeds": 24, "iterations": 3000, "test_every": 5, "test_contexts": 75}
     assert red["iterations"] == 150 and red["seeds"] == 3
     assert smoke["n_experts"] == 2 and smoke["samples_per_expert"] == 4
-    assert D.counts("hopper-jump", "bbrl", "reduced")["iterations"] == 70
+    assert D.counts("hopper-jump", "bbrl", "reduced")["iterations"] == 28
+    bpo = D.counts("box-pushing-obstacle", "diskill", "reduced")
+    assert bpo["iterations"] == 90 and bpo["n_experts"] == 5
+    assert "n_experts" not in D.counts("box-pushing-obstacle", "bbrl", "reduced")
 
 
 def test_bad_input():

@@ -20,7 +20,10 @@ from vslbook.budget import Budget, get_budget
 from vslbook.erl.diskill_config import diskill_config
 from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
 
-__all__ = ["FIGURES", "LABELS", "counts", "curves", "env_id", "load_model", "run_set"]
+__all__ = [
+    "FIGURES", "LABELS", "PPO_TASKS", "counts", "curves", "env_id", "load_model", "ppo_run",
+    "ppo_steps", "run_set",
+]  # fmt: skip
 
 #: figure → (task, methods) as in the thesis (PPO runs separately, step-based).
 FIGURES: dict[str, tuple[str, tuple[str, ...]]] = {
@@ -34,8 +37,10 @@ FIGURES: dict[str, tuple[str, tuple[str, ...]]] = {
 #: method → the label of the thesis's figures.
 LABELS = {
     "diskill": "Di-SkilL", "bbrl": "BBRL", "lindiskill": "LinDi-SkilL",
-    "diskill-v2": "Di-SkilLV2", "diskill-v3": "Di-SkilLV3",
+    "diskill-v2": "Di-SkilLV2", "diskill-v3": "Di-SkilLV3", "ppo": "PPO",
 }  # fmt: skip
+#: tasks where the thesis also runs step-based PPO (Figs. 4.3c and 4.4b; Tables B.3, B.6).
+PPO_TASKS = ("reacher5", "box-pushing-obstacle")
 
 
 def env_id(task: str) -> str:
@@ -48,21 +53,37 @@ def env_id(task: str) -> str:
     )
 
 
+#: task → (share of the thesis's iterations, most experts) at the reduced budget: the
+#: 5-link reacher keeps its 10 experts and 5 % of the iterations (the qualitative result of
+#: Fig. 4.2 / 4.3c must show); the tasks with slower episodes get 2 % and at most 5 experts
+#: (an iteration of box pushing with 10 experts runs 500 episodes, about 25 s on one core).
+REDUCED = {
+    "reacher5": (0.05, None),
+    "table-tennis-4d": (0.02, None),
+    "table-tennis-hard": (0.02, 5),
+    "hopper-jump": (0.02, None),
+    "box-pushing-obstacle": (0.02, 5),
+    "mini-golf": (0.02, 5),
+}
+
+
 def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[str, Any]:
     """What a budget sets for ``method`` on ``task`` (the rest is the thesis's).
 
     * full: the thesis's iterations, its 24 seeds (Section 4.5.3; Fig. 4.3b: "at least 4",
       we use 24 there too), evaluation every 5 iterations on 75 contexts (the authors');
-    * reduced: 5 % of the iterations (at least 20), 3 seeds, evaluation every 5 iterations;
+    * reduced: 3 seeds, evaluation every 5 iterations, and the share of iterations and
+      experts of :data:`REDUCED` (at least 20 iterations);
     * smoke ("does it run"): 2 iterations of at most 2 experts with 4 samples each,
       1 seed, evaluation after each iteration on 10 contexts.
     """
     b = get_budget(budget)
     cfg = diskill_config(task, method)
+    share, most = REDUCED[task]
     out: dict[str, Any] = {
         "seeds": b.pick(smoke=1, reduced=3, full=24),
         "iterations": b.pick(
-            smoke=2, reduced=max(20, b.scale(cfg.iterations)), full=cfg.iterations
+            smoke=2, reduced=max(20, round(share * cfg.iterations)), full=cfg.iterations
         ),
         "test_every": b.pick(smoke=1, reduced=5, full=5),
         "test_contexts": b.pick(smoke=10, reduced=75, full=75),
@@ -70,6 +91,8 @@ def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[s
     if b.name == "smoke":
         out["n_experts"] = min(cfg.n_experts, 2)
         out["samples_per_expert"] = 4
+    elif b.name == "reduced" and most is not None and cfg.n_experts > most:
+        out["n_experts"] = most
     return out
 
 
@@ -103,6 +126,62 @@ def run_set(
             dirs.append(rd.path)
         out[method] = dirs
     return out
+
+
+def ppo_steps(task: str, budget: Budget | str | None = None) -> int:
+    """PPO's environment steps on ``task`` at a budget: as many episodes as Di-SkilL's run at
+    that budget (full: :func:`vslbook.erl.ppo_ch4.matched_total_steps`), rounded up to whole
+    rollouts of 16384 steps; smoke: one rollout."""
+    from vslbook.erl.ppo_ch4 import N_ROLLOUT_STEPS, matched_total_steps
+
+    b = get_budget(budget)
+    if b.name == "full":
+        return matched_total_steps(task)
+    if b.name == "smoke":
+        return N_ROLLOUT_STEPS
+    c = counts(task, "diskill", b)
+    cfg = diskill_config(task, "diskill", **{k: v for k, v in c.items() if k != "seeds"})
+    horizon = {"reacher5": 200, "box-pushing-obstacle": 100}[task]
+    steps = cfg.iterations * cfg.episodes_per_iteration * horizon
+    return -(-steps // N_ROLLOUT_STEPS) * N_ROLLOUT_STEPS
+
+
+def ppo_run(
+    task: str, seed: int, budget: Budget | str | None = None, root: str | Path = "runs",
+    *, progress: bool = False,
+) -> Path:  # fmt: skip
+    """Train (or reuse) PPO (Table B.3 / B.6) on the step-based ``task`` in a run directory
+    whose ``metrics.jsonl`` rows carry ``samples`` = completed training episodes, as the
+    episodic methods' rows do (so :func:`curves` puts them on one axis)."""
+    from dataclasses import asdict
+
+    from vslbook.erl.ppo_ch4 import N_ROLLOUT_STEPS, ppo_ch4_config, train_ppo_ch4
+    from vslbook.results import RunDir
+    from vslbook.training import _stale
+
+    if task not in PPO_TASKS:
+        raise ValueError(f"the thesis runs PPO on {PPO_TASKS}, not on {task!r}")
+    b = get_budget(budget)
+    config = ppo_ch4_config(task, total_steps=ppo_steps(task, b))
+    c = counts(task, "diskill", b)
+    evals = {
+        "eval_every": b.pick(smoke=N_ROLLOUT_STEPS, reduced=N_ROLLOUT_STEPS,
+                             full=10 * N_ROLLOUT_STEPS),
+        "eval_episodes": c["test_contexts"],
+    }  # fmt: skip
+    record = {"algo": "ppo", "env": task, "seed": int(seed)} | asdict(config) | evals
+    scope = ("srl/",)
+    rd = RunDir.create(root, record, code_exclude=scope)
+    if not rd.code_matches:
+        rd = _stale(rd, root, record, None, scope)
+    if rd.done:
+        return rd.path
+    rows = train_ppo_ch4(task, config, int(seed), run_dir=rd.path, progress=progress, **evals)
+    logged = len(rd.metrics())
+    for i, row in enumerate(rows[logged:], start=logged):
+        rd.log(i, **(row | {"samples": row["episodes"]}))
+    rd.mark_done({"env_steps": rows[-1]["env_steps"], "episodes": rows[-1]["episodes"]})
+    return rd.path
 
 
 def curves(
