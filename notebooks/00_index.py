@@ -55,7 +55,7 @@
 # | Chs. 3–4 tasks | [`01_tasks`](01_tasks.ipynb) | `vslbook.envs.robot` (every task; `render` for the pictures) | a picture of each MuJoCo scene, live |
 # | Ch. 2 Foundations | [`02_foundations`](02_foundations.ipynb) | `vslbook.bounds.foundations`, `vslbook.dists`, `vslbook.movement`, `vslbook.erl.pg`, `vslbook.envs` | ERL against SRL learning curves, movement primitives (ProMP / DMP / ProDMP), diffusion forward process, live |
 # | Ch. 3 SVSL | [`03_svsl`](03_svsl.ipynb) | `vslbook.erl.svsl` (Algorithm 1), `svsl_model`, `more`, `surrogate`, `reps`, `hireps`, `ladips`, `ppo`; `vslbook.bounds.svsl`; `vslbook.experiments.svsl_*`; `vslbook.envs.robot` | Figs. 3.1, 3.2 (beer pong, table tennis), 3.3 (rendered), 3.5, A.1, A.2, live |
-# | Ch. 4 Di-SkilL | `04_diskill` (planned) | `vslbook.erl` | — |
+# | Ch. 4 Di-SkilL | [`04_diskill`](04_diskill.ipynb) | `vslbook.erl.diskill` (Algorithms 2, 3), `diskill_nets`, `diskill_config`, `trpl` (trust-region projection), `ppo_ch4`; `vslbook.bounds.diskill`; `vslbook.experiments.diskill_*`, `ch4_algorithms`; `vslbook.envs.robot` | Figs. 4.2, 4.3b, 4.3c, 4.4, live |
 # | Ch. 5 DIME | [`05_dime`](05_dime.ipynb) | `vslbook.srl` (diffusion policy, distributional CrossQ critic, BatchRenorm, the loop `srl.dime`), `vslbook.bounds.dime`, `vslbook.envs.step_based`, `vslbook.experiments` | Fig. 5.1, 5.7 and the ablations (5.2c, 5.4, 5.6, 5.8, C.2) live; Figs. 5.2a–b and 5.3 from the published runs next to ours |
 #
 # The [bibliography](bibliography.md) lists the works the notebooks cite. Numbers the
@@ -121,6 +121,7 @@
 # | `01_tasks` | every task built, a picture of each scene; about 15 s | the same |
 # | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; not yet timed end to end |
 # | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1, 3.2, 3.5, A.1, A.2 at 5 % of the thesis's counts, 3 seeds; about 1.5 h estimated from per-iteration times, not yet timed end to end |
+# | `04_diskill` | every check; every Di-SkilL, BBRL, LinDi-SkilL and PPO run set at 2 iterations of 2 experts with 4 samples (PPO: one rollout, 5LR only); about 90 s on a busy machine | Fig. 4.2 / 4.3c at 5 % of the 5LR iterations with its 10 experts, the other tasks at 2 % with at most 5 experts, 3 seeds; many hours estimated from per-iteration times (box pushing is the slowest, about 25 s per iteration of 500 episodes), not yet timed end to end |
 # | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch, from per-run times |
 #
 # A second `make book` executes only the notebooks whose code changed (an execution cache

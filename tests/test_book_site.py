@@ -93,8 +93,8 @@ def _pages(site: Path) -> list[str]:
 
 def test_site_has_the_chapters_and_bibliography(site: Path):
     pages = set(_pages(site))
-    for name in ("index.html", "02_foundations.html", "03_svsl.html", "05_dime.html",
-                 "bibliography.html"):
+    for name in ("index.html", "02_foundations.html", "03_svsl.html", "04_diskill.html",
+                 "05_dime.html", "bibliography.html"):
         assert name in pages, f"{name} missing from the site: {sorted(pages)}"
     # MathJax is served by the site itself
     assert (site / "_static" / "mathjax" / "tex-chtml.js").is_file()
@@ -102,7 +102,7 @@ def test_site_has_the_chapters_and_bibliography(site: Path):
 
 
 # Pages whose notebooks draw figures: each must show at least one.
-FIGURE_PAGES = ("02_foundations.html", "03_svsl.html", "05_dime.html")
+FIGURE_PAGES = ("02_foundations.html", "03_svsl.html", "04_diskill.html", "05_dime.html")
 
 
 def test_every_page_renders_offline(site: Path, server: str, browser):

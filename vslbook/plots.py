@@ -194,9 +194,9 @@ def learning_curve(
     if len(curve) == 1:
         kw.setdefault("marker", "o")
         (line,) = ax.plot(curve[x], curve["iqm"], label=label, color=color, **kw)
-        ax.errorbar(curve[x], curve["iqm"], yerr=[curve["iqm"] - curve["lo"],
-                    curve["hi"] - curve["iqm"]], color=line.get_color(), capsize=3,
-                    linestyle="none")  # fmt: skip
+        iqm, lo, hi = (curve[k].to_numpy(float) for k in ("iqm", "lo", "hi"))
+        ax.errorbar(curve[x].to_numpy(float), iqm, yerr=[iqm - lo, hi - iqm],
+                    color=line.get_color(), capsize=3, linestyle="none")  # fmt: skip
         if not ax.get_xlabel():
             ax.set_xlabel(x.replace("_", " "))
         if not ax.get_ylabel():
