@@ -77,13 +77,14 @@ def _disk(ax: plt.Axes) -> None:
 
 def draw_context_regions(ax: plt.Axes, model: Any, grid: np.ndarray | None = None) -> plt.Axes:
     """Fig. 4.2a: each goal in the colour of the expert with the largest π(c | o), the
-    intensity proportional to that probability."""
+    intensity proportional to that probability (relative to the expert's own peak)."""
     grid = disk_grid() if grid is None else grid
     pref = log_preference(model, grid)  # (K, M)
     best = pref.argmax(0)
-    p = np.exp(pref.max(0))
+    # intensity: the expert's π(c | o) relative to its own largest value on the grid
+    rel = np.exp(pref.max(0) - pref.max(1)[best])
     colors = _colors(pref.shape[0])[best]
-    colors[:, 3] = np.clip(p / p.max(), 0.05, 1.0)
+    colors[:, 3] = np.clip(rel, 0.1, 1.0)
     ax.scatter(grid[:, 0], grid[:, 1], c=colors, s=18, marker="s", linewidths=0)
     _disk(ax)
     ax.set_title("(a) most probable expert per goal")
