@@ -83,6 +83,8 @@ from vslbook.bounds.diskill_toy import (
     uniform_prior_gating,
 )
 from vslbook.bounds.foundations import _worst
+from vslbook.bounds.svsl import BoundToy
+from vslbook.bounds.svsl import _bound_check as svsl_bound_check
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
     _count,
@@ -239,6 +241,16 @@ def _perturb_energy(model: EnergyMoE, rng: np.random.Generator, o: int, t: float
     return model.replace(amplitude=amplitude, slope=slope, shift=shift), d
 
 
+#: The energy-based toy for :func:`vslbook.bounds.svsl._bound_check` (π(o) = 1/K scales the
+#: per-expert objectives).
+EBM_TOY = BoundToy(
+    random_energy_moe, ebm_responsibilities, ebm_curriculum_objective, ebm_lower_bound,
+    ebm_expected_responsibility_kls, 13,
+    ("bound is tight at new = old (B.1 closed-form auxiliaries)", "Eq. B.1"), "Eq. B.1 (A.4)",
+    "change of the bound = pi(o) x change of the {kind} objective",
+)  # fmt: skip
+
+
 def _bound_check(
     kind: str,
     seed: int,
@@ -250,86 +262,11 @@ def _bound_check(
     equation: str,
     title: str,
 ) -> CheckReport:
-    """Shared body of :func:`check_expert_bound` and :func:`check_context_bound`."""
-    problem = ToyProblem(alpha=alpha, beta=beta)
-    rng = _rng(seed, 13)
-    old = random_energy_moe(seed)
-    k = old.n_components
-    aux = ebm_responsibilities(problem, old)  # B.1: aux = the old model's responsibilities
-    j_old = ebm_curriculum_objective(problem, old)
-    lb_old = ebm_lower_bound(problem, old, *aux)
-    s_old = [surrogate(problem, old, *aux, o) for o in range(k)]
-    j_new, lb_new, gap_pred, d_lb, d_sur = [], [], [], [], []
-    for _ in range(_count("n_perturbations", n_perturbations)):
-        o = int(rng.integers(k))
-        new, _ = perturb(old, rng, o, 1.0)
-        j = ebm_curriculum_objective(problem, new)
-        lb = ebm_lower_bound(problem, new, *aux)
-        kt, kc = ebm_expected_responsibility_kls(problem, new, *aux)
-        j_new.append(j)
-        lb_new.append(lb)
-        gap_pred.append(alpha * kt + (beta - alpha) * kc)
-        d_lb.append(lb - lb_old)
-        d_sur.append((surrogate(problem, new, *aux, o) - s_old[o]) / k)  # pi(o) = 1/K
-    j_new, lb_new, gap_pred = np.array(j_new), np.array(lb_new), np.array(gap_pred)
-    d_lb, d_sur = np.array(d_lb), np.array(d_sur)
-    tol = _tol(j_old, *j_new, *lb_new)
-    ts = np.linspace(-1.0, 1.0, 11)
-    o_path = int(rng.integers(k))
-    _, d = perturb(old, rng, o_path, 0.0)
-    path_j, path_lb = [], []
-    for t in ts:
-        m, _ = perturb(old, rng, o_path, float(t), d)
-        path_j.append(ebm_curriculum_objective(problem, m))
-        path_lb.append(ebm_lower_bound(problem, m, *aux))
-    checks = (
-        _worst(
-            f"bound(new; aux = old) <= J(new) for {len(j_new)} perturbed {kind}",
-            equation,
-            lb_new,
-            j_new,
-            tol,
-            "<=",
-        ),
-        Check(
-            "bound is tight at new = old (B.1 closed-form auxiliaries)",
-            "Eq. B.1",
-            lb_old,
-            j_old,
-            tol,
-        ),
-        _worst(
-            "J(new) - bound(new) = alpha E[KL_theta] + (beta-alpha) E[KL_c]",
-            "Eq. B.1 (A.4)",
-            j_new - lb_new,
-            gap_pred,
-            tol,
-        ),
-        _worst(
-            f"change of the bound = pi(o) x change of the {kind} objective",
-            equation,
-            d_lb,
-            d_sur,
-            tol,
-        ),
-        _worst(
-            "J(new) - J(old) >= change of the bound (monotonic improvement)",
-            equation,
-            d_lb,
-            j_new - j_old,
-            tol,
-            "<=",
-        ),
-    )
-    data = {
-        "t": ts,
-        "path_objective": np.array(path_j),
-        "path_bound": np.array(path_lb),
-        "objective_new": j_new,
-        "bound_new": lb_new,
-        "objective_old": np.array(j_old),
-    }
-    return CheckReport(title, checks, data)
+    """Chapter 3's bound check (:func:`vslbook.bounds.svsl._bound_check`) on the EBM toy."""
+    return svsl_bound_check(
+        kind, seed, alpha, beta, n_perturbations, perturb, surrogate,
+        lambda model, o: 1.0 / model.n_components, equation, title, EBM_TOY,
+    )  # fmt: skip
 
 
 def check_expert_bound(
