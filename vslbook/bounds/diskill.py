@@ -83,13 +83,11 @@ from vslbook.bounds.diskill_toy import (
     uniform_prior_gating,
 )
 from vslbook.bounds.foundations import _worst
-from vslbook.bounds.svsl import BoundToy
+from vslbook.bounds.svsl import BoundToy, _auxiliary_bounds
 from vslbook.bounds.svsl import _bound_check as svsl_bound_check
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
-    _count,
     _perturb_expert,
-    _random_aux,
     _rng,
 )
 
@@ -157,20 +155,11 @@ def check_curriculum_objective(
     bound = bound or ebm_lower_bound
     rng = _rng(seed, 12)
     model = random_energy_moe(seed)
-    k = model.n_components
     objective = ebm_curriculum_objective(problem, model)
     log_rt, log_rc = ebm_responsibilities(problem, model)
-    auxes = [
-        _random_aux(rng, problem, k, 1.0) for _ in range(_count("n_auxiliaries", n_auxiliaries))
-    ]
-    auxes.append((log_rt, _random_aux(rng, problem, k, 2.0)[1]))  # exact in theta, wrong in c
-    bounds, kl_t, kl_c = [], [], []
-    for aux in auxes:
-        bounds.append(float(bound(problem, model, *aux)))
-        kt, kc = ebm_expected_responsibility_kls(problem, model, *aux)
-        kl_t.append(kt)
-        kl_c.append(kc)
-    bounds, kl_t, kl_c = np.array(bounds), np.array(kl_t), np.array(kl_c)
+    bounds, kl_t, kl_c = _auxiliary_bounds(
+        problem, model, bound, ebm_expected_responsibility_kls, log_rt, rng, n_auxiliaries
+    )
     tol = _tol(objective, *bounds)
     own = float(bound(problem, model, log_rt, log_rc))
     fine = ToyProblem(alpha=alpha, beta=beta, n_context=128, n_theta=1201)
@@ -193,14 +182,14 @@ def check_curriculum_objective(
             tol,
         ),
         _worst(
-            f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(auxes)} auxiliaries",
+            f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(bounds)} auxiliaries",
             "Eq. B.1 (A.4)",
             np.full(bounds.shape, objective),
             bounds + alpha * kl_t + (beta - alpha) * kl_c,
             tol,
         ),
         _worst(
-            f"bound <= J for {len(auxes)} auxiliaries (needs beta >= alpha)",
+            f"bound <= J for {len(bounds)} auxiliaries (needs beta >= alpha)",
             "Eqs. 4.4, 4.5",
             bounds,
             objective,

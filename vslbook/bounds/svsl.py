@@ -94,6 +94,30 @@ def _tol(*values: float) -> float:
     return relative_tol(*values, rtol=1e-8)
 
 
+def _auxiliary_bounds(
+    problem: ToyProblem,
+    model: object,
+    bound: Callable,
+    kls: Callable,
+    log_rt: np.ndarray,
+    rng: np.random.Generator,
+    n_auxiliaries: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The bound and its two expected KLs for ``n_auxiliaries`` random auxiliaries plus one
+    that is exact in ``theta`` (``log_rt``) and wrong in ``c`` (Eq. A.4's identity)."""
+    k = model.n_components  # type: ignore[attr-defined]
+    n = _count("n_auxiliaries", n_auxiliaries)
+    auxes = [_random_aux(rng, problem, k, 1.0) for _ in range(n)]
+    auxes.append((log_rt, _random_aux(rng, problem, k, 2.0)[1]))  # exact in theta, wrong in c
+    bounds, kl_t, kl_c = [], [], []
+    for aux in auxes:
+        bounds.append(float(bound(problem, model, *aux)))
+        kt, kc = kls(problem, model, *aux)
+        kl_t.append(kt)
+        kl_c.append(kc)
+    return np.array(bounds), np.array(kl_t), np.array(kl_c)
+
+
 def check_objective_decomposition(
     seed: int = 0,
     alpha: float = 0.5,
@@ -124,20 +148,11 @@ def check_objective_decomposition(
     bound = bound or lower_bound
     rng = _rng(seed, 2)
     model = random_toy_moe(seed)
-    k = model.n_components
     objective = maxent_curriculum_objective(problem, model)
     log_rt, log_rc = responsibilities(problem, model)
-    auxes = [
-        _random_aux(rng, problem, k, 1.0) for _ in range(_count("n_auxiliaries", n_auxiliaries))
-    ]
-    auxes.append((log_rt, _random_aux(rng, problem, k, 2.0)[1]))  # exact in theta, wrong in c
-    bounds, kl_t, kl_c = [], [], []
-    for aux in auxes:
-        bounds.append(float(bound(problem, model, *aux)))
-        kt, kc = expected_responsibility_kls(problem, model, *aux)
-        kl_t.append(kt)
-        kl_c.append(kc)
-    bounds, kl_t, kl_c = np.array(bounds), np.array(kl_t), np.array(kl_c)
+    bounds, kl_t, kl_c = _auxiliary_bounds(
+        problem, model, bound, expected_responsibility_kls, log_rt, rng, n_auxiliaries
+    )
     identity_rhs = bounds + alpha * kl_t + (beta - alpha) * kl_c
     tol = _tol(objective, *bounds)
     own = float(bound(problem, model, log_rt, log_rc))
@@ -160,14 +175,14 @@ def check_objective_decomposition(
             tol,
         ),
         _worst(
-            f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(auxes)} auxiliaries",
+            f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(bounds)} auxiliaries",
             "Eq. A.4",
             np.full(bounds.shape, objective),
             identity_rhs,
             tol,
         ),
         _worst(
-            f"bound <= J for {len(auxes)} auxiliaries (needs beta >= alpha)",
+            f"bound <= J for {len(bounds)} auxiliaries (needs beta >= alpha)",
             "Eq. A.4",
             bounds,
             objective,
