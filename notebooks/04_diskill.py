@@ -681,13 +681,21 @@ def cov_of(x):
 
 z2 = np.zeros(2)
 start = np.linalg.cholesky(S_o2)  # Σ_o is feasible (C = 0)
-brute_cov = minimize(
-    lambda x: gauss_kl(z2, cov_of(x), z2, S2),
-    [np.log(start[0, 0]), start[1, 0], np.log(start[1, 1])],
-    method="SLSQP",
-    constraints=[{"type": "ineq", "fun": lambda x: eps_c2 - gauss_kl(z2, cov_of(x), z2, S_o2)}],
-    options={"ftol": 1e-15, "maxiter": 500},
-)
+x0 = [np.log(start[0, 0]), start[1, 0], np.log(start[1, 1])]
+for _ in range(5):  # restarted from its own answer: at ftol 1e-15 its line search can stop short
+    brute_cov = minimize(
+        lambda x: gauss_kl(z2, cov_of(x), z2, S2),
+        x0,
+        method="SLSQP",
+        constraints=[{"type": "ineq", "fun": lambda x: eps_c2 - gauss_kl(z2, cov_of(x), z2, S_o2)}],
+        options={"ftol": 1e-15, "maxiter": 500},
+    )
+    x0 = brute_cov.x
+    if brute_cov.success:
+        break
+# a feasible point with no descent direction left (status 8) is an optimum to this precision
+assert brute_cov.success or brute_cov.status == 8, brute_cov.message
+assert eps_c2 - gauss_kl(z2, cov_of(brute_cov.x), z2, S_o2) >= -1e-10
 kl_layer, kl_brute = gauss_kl(z2, p_S2, z2, S2), gauss_kl(z2, cov_of(brute_cov.x), z2, S2)
 print(f"mean: layer {p_mu2}, SLSQP {brute_mu}")
 print(
@@ -695,7 +703,7 @@ print(
     f"C(Σ̃) = {gauss_kl(z2, p_S2, z2, S_o2):.10f}"
 )
 assert np.abs(p_mu2 - brute_mu).max() < 1e-6
-assert brute_cov.success and abs(kl_layer - kl_brute) < 1e-8 and kl_layer <= kl_brute + 1e-10
+assert abs(kl_layer - kl_brute) < 1e-8 and kl_layer <= kl_brute + 1e-10
 assert np.abs(p_S2 - cov_of(brute_cov.x)).max() < 1e-4
 
 # the layer's Σ̃ on the path:  Σ̃⁻¹ − Σ⁻¹ = η (Σ_o⁻¹ − Σ̃⁻¹)

@@ -128,6 +128,23 @@ def test_project_mean_solves_the_constrained_problem(d, seed, step):
 # ---------------------------------------------------------------- covariance vs brute force
 
 
+def _slsqp(objective, p0, slack):
+    """SLSQP from ``p0`` with the constraint ``slack >= 0``, restarted from its own answer
+    until it reports success (its line search can stop a hair short at ftol 1e-15, depending
+    on the BLAS threads); a feasible point where no descent direction is left (status 8)
+    is accepted, the caller compares the optimum itself."""
+    x = p0
+    for _ in range(5):
+        res = minimize(objective, x, method="SLSQP", constraints=[{"type": "ineq", "fun": slack}],
+                       options={"ftol": 1e-15, "maxiter": 1000})  # fmt: skip
+        x = res.x
+        if res.success:
+            break
+    assert res.success or res.status == 8, res.message
+    assert slack(res.x) >= -1e-10
+    return res
+
+
 @pytest.mark.parametrize("seed", [0, 1, 2, 3])
 def test_project_cov_minimises_kl_from_projection_to_proposal(seed):
     """Σ̃ = argmin KL(N(0,Σ̃) ‖ N(0,Σ)) s.t. C(Σ̃) ≤ ε, found by SLSQP over a Cholesky factor."""
@@ -150,14 +167,7 @@ def test_project_cov_minimises_kl_from_projection_to_proposal(seed):
 
     L0 = old_chol.numpy()
     p0 = np.array([np.log(L0[0, 0]), L0[1, 0], np.log(L0[1, 1])])  # feasible start
-    res = minimize(
-        objective,
-        p0,
-        method="SLSQP",
-        constraints=[{"type": "ineq", "fun": slack}],
-        options={"ftol": 1e-15, "maxiter": 1000},
-    )
-    assert res.success, res.message
+    res = _slsqp(objective, p0, slack)
     A = _np_chol(res.x)
     np.testing.assert_allclose(got_S, A @ A.T, atol=2e-5)
     assert objective(res.x) == pytest.approx(_np_kl0(got_S, S), rel=1e-5)
