@@ -85,3 +85,30 @@ def test_fig_4_2_analysis(reacher_runs):
     expected = diskill_config("reacher5", "bbrl", iterations=2, test_every=1, test_contexts=10,
                               n_experts=1, samples_per_expert=4)  # fmt: skip
     assert asdict(bbrl.config) == asdict(expected)
+
+
+def test_ppo_ch4_from_the_command_line(tmp_path, monkeypatch):
+    """`vslbook run ppo-ch4`: Table B.3 at Di-SkilL's episode count; rows carry `samples`."""
+    from vslbook.budget import get_budget
+    from vslbook.erl.ppo_ch4 import matched_total_steps
+    from vslbook.experiments.ch4_algorithms import ppo_defaults
+    from vslbook.results import RunDir
+
+    full = ppo_defaults("vslbook/Reacher5SparseStep-v0", get_budget("full"), {})
+    assert full.total_steps == matched_total_steps("reacher5") == 9156 * 16384
+    assert (full.learning_rate, full.batch_size, full.net_arch, full.gamma) == (
+        3e-4,
+        512,
+        (32, 32),
+        1.0,
+    )
+    red = ppo_defaults("vslbook/BoxPushingObstacleStep-v0", get_budget("reduced"), {})
+    # Di-SkilL at reduced on box pushing: 90 iterations x 5 experts x 50 episodes of 100 steps
+    assert red.total_steps == -(-90 * 5 * 50 * 100 // 16384) * 16384
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    path = D.ppo_run("reacher5", 0, "smoke", tmp_path)
+    rows = RunDir.open(path).metrics()
+    assert rows[-1]["samples"] == rows[-1]["episodes"] > 0 and rows[-1]["env_steps"] == 16384
+    assert D.ppo_run("reacher5", 0, "smoke", tmp_path) == path  # finished: reused
+    with pytest.raises(ValueError, match="not on 'mini-golf'"):
+        D.ppo_run("mini-golf", 0, "smoke", tmp_path)

@@ -131,7 +131,7 @@ ALGORITHM_MODULES: dict[str, str] = {
     "ppo": "vslbook.experiments.ch3_algorithms",
     **{
         name: "vslbook.experiments.ch4_algorithms"
-        for name in ("diskill", "lindiskill", "bbrl", "diskill-v2", "diskill-v3")
+        for name in ("diskill", "lindiskill", "bbrl", "diskill-v2", "diskill-v3", "ppo-ch4")
     },
 }
 

@@ -150,37 +150,17 @@ def ppo_run(
     task: str, seed: int, budget: Budget | str | None = None, root: str | Path = "runs",
     *, progress: bool = False,
 ) -> Path:  # fmt: skip
-    """Train (or reuse) PPO (Table B.3 / B.6) on the step-based ``task`` in a run directory
-    whose ``metrics.jsonl`` rows carry ``samples`` = completed training episodes, as the
-    episodic methods' rows do (so :func:`curves` puts them on one axis)."""
-    from dataclasses import asdict
-
-    from vslbook.erl.ppo_ch4 import N_ROLLOUT_STEPS, ppo_ch4_config, train_ppo_ch4
-    from vslbook.results import RunDir
-    from vslbook.training import _stale
+    """Train (or reuse) PPO (Table B.3 / B.6) on the step-based ``task``: the run directory
+    ``vslbook run ppo-ch4`` makes (:mod:`vslbook.experiments.ch4_algorithms`)."""
+    from vslbook.experiments.ch4_algorithms import PPO_ENVS
+    from vslbook.training import run
 
     if task not in PPO_TASKS:
         raise ValueError(f"the thesis runs PPO on {PPO_TASKS}, not on {task!r}")
-    b = get_budget(budget)
-    config = ppo_ch4_config(task, total_steps=ppo_steps(task, b))
-    c = counts(task, "diskill", b)
-    evals = {
-        "eval_every": b.pick(smoke=N_ROLLOUT_STEPS, reduced=N_ROLLOUT_STEPS,
-                             full=10 * N_ROLLOUT_STEPS),
-        "eval_episodes": c["test_contexts"],
-    }  # fmt: skip
-    record = {"algo": "ppo", "env": task, "seed": int(seed)} | asdict(config) | evals
-    scope = ("srl/",)
-    rd = RunDir.create(root, record, code_exclude=scope)
-    if not rd.code_matches:
-        rd = _stale(rd, root, record, None, scope)
-    if rd.done:
-        return rd.path
-    rows = train_ppo_ch4(task, config, int(seed), run_dir=rd.path, progress=progress, **evals)
-    logged = len(rd.metrics())
-    for i, row in enumerate(rows[logged:], start=logged):
-        rd.log(i, **(row | {"samples": row["episodes"]}))
-    rd.mark_done({"env_steps": rows[-1]["env_steps"], "episodes": rows[-1]["episodes"]})
+    env = next(e for e, t in PPO_ENVS.items() if t == task)
+    rd = run("ppo-ch4", env, seed, budget, root=root, progress=progress)
+    if rd.failed:
+        raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
     return rd.path
 
 
