@@ -112,3 +112,23 @@ def test_ppo_ch4_from_the_command_line(tmp_path, monkeypatch):
     assert D.ppo_run("reacher5", 0, "smoke", tmp_path) == path  # finished: reused
     with pytest.raises(ValueError, match="not on 'mini-golf'"):
         D.ppo_run("mini-golf", 0, "smoke", tmp_path)
+
+
+def test_skills_at_a_context(reacher_runs):
+    """Figs. 4.5 / 4.6: the experts the gating picks at a context, most probable first."""
+    from vslbook.experiments import diskill_skills as SK
+
+    model = D.load_model(reacher_runs["diskill"][0])
+    c = np.array([0.2, 0.3])
+    rows = SK.skills(model, c, min_gating=0.0)
+    assert sorted(r["expert"] for r in rows) == [0, 1]
+    assert rows[0]["gating"] >= rows[1]["gating"]
+    assert abs(sum(r["gating"] for r in rows) - 1) < 1e-9
+    np.testing.assert_array_equal(
+        rows[0]["theta"], model.mean_parameters(c[None], np.array([rows[0]["expert"]]))[0]
+    )
+    assert SK.skills(model, c, min_gating=0.99) == []
+    fig, ax = plt.subplots()
+    with pytest.raises(ValueError, match="not 'ball'"):
+        SK.draw_skills(ax, model, c, "ball")
+    plt.close(fig)

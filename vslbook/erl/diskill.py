@@ -301,7 +301,9 @@ class DiSkill:
         return means[torch.as_tensor(experts), torch.arange(len(c))].numpy()
 
     def test(self) -> dict[str, float]:
-        """Algorithm 3 on the fixed test contexts with the experts' means."""
+        """Algorithm 3 on the fixed test contexts with the experts' means: mean return, success,
+        share executed, experts used, and the mean of each per-episode number of the task
+        over the episodes where it applies (``test_<key>``, e.g. the hopper's max height)."""
         gen = torch.Generator().manual_seed(self.seed * 1_000_003 + self.iteration)
         o = self.choose_experts(self.test_contexts, gen)
         theta = self.mean_parameters(self.test_contexts, o)
@@ -312,6 +314,10 @@ class DiSkill:
         }
         if self.task.has_success:
             out["test_success"] = float(roll.success.mean())
+        for key, values in roll.info.items():  # e.g. the hopper's max_height (Fig. B.3)
+            finite = values[np.isfinite(values)]
+            if key != "success" and len(finite):
+                out[f"test_{key}"] = float(finite.mean())
         out["test_experts_used"] = float(len(np.unique(o)))
         return out
 
