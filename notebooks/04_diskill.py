@@ -50,6 +50,11 @@
 # 11. Fig. B.3 — the hopper jump in detail
 
 # %%
+import os
+
+if os.environ.get("MUJOCO_GL") not in ("egl", "osmesa"):
+    os.environ["MUJOCO_GL"] = "osmesa"  # offscreen pictures (Figs. 4.5, 4.6), before MuJoCo loads
+
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
