@@ -11,8 +11,9 @@ independent noise at every step has little chance of finding it.
 The thesis's PPO is built on the code of Otto et al. (2021, "Differentiable trust region
 layers for deep reinforcement learning", ICLR) with "all code-level optimisations" of
 Engstrom et al. (2020). We use stable-baselines3 (Raffin et al. 2019), as Chapter 3 does
-(:mod:`vslbook.erl.ppo`), with the settings of Tables B.3 and B.6 and those optimisations
-(:class:`PPOCh4Config` lists where each comes from). Engstrom et al. name nine: value
+(:mod:`vslbook.erl.ppo`, its shared loop in :mod:`vslbook.erl.ppo_loop`), with the
+settings of Tables B.3 and B.6 and those optimisations (:class:`PPOCh4Config` lists where
+each comes from). Engstrom et al. name nine: value
 clipping, reward scaling, reward clipping, observation normalisation, observation
 clipping, orthogonal initialisation with layer scaling, Adam step-size annealing, tanh
 units and a global gradient-norm clip. Stable-baselines3 has seven of them by default (with
@@ -53,7 +54,7 @@ rollouts (150,011,904 steps); BPO 4500 × 10 × 50 episodes of 100 steps = 13733
 (225,001,472 steps).
 
 Checkpoints and exact resume work as in :mod:`vslbook.erl.ppo` (its
-:func:`~vslbook.erl.ppo.train_with_checkpoints`); the box-pushing snapshot also keeps the
+:func:`~vslbook.erl.ppo_loop.train_with_checkpoints`); the box-pushing snapshot also keeps the
 bias forces of the last physics step, which the torque law of the next step reads before
 MuJoCo recomputes them. A resumed run logs the numbers of an uninterrupted one on CPU
 (except ``env_steps_per_s``).
@@ -79,8 +80,8 @@ from vslbook.envs.robot.box_pushing_step import BoxPushingObstacleStepEnv
 from vslbook.envs.robot.reacher5 import N_STEPS as REACHER_HORIZON
 from vslbook.envs.robot.reacher5_sparse_step import Reacher5SparseStepEnv
 from vslbook.erl.diskill_config import diskill_config
-from vslbook.erl.ppo import (
-    EVAL_GOAL_SEED,
+from vslbook.erl.ppo import EVAL_GOAL_SEED
+from vslbook.erl.ppo_loop import (
     build_ppo,
     check_ppo_fields,
     check_run_arguments,
@@ -311,7 +312,7 @@ def evaluation_contexts(task: str, n: int, seed: int = EVAL_CONTEXT_SEED) -> np.
 class _WholeRunPPO(PPO):
     """SB3's PPO whose schedules run over the whole run of ``run_steps`` environment steps.
 
-    :func:`~vslbook.erl.ppo.train_with_checkpoints` calls ``learn`` once per evaluation,
+    :func:`~vslbook.erl.ppo_loop.train_with_checkpoints` calls ``learn`` once per evaluation,
     and SB3 would measure a schedule's progress against the end of the current call. Here
     the progress of an update is 1 − t₀ / ``run_steps`` with t₀ the steps taken before the
     rollout it learns from, so with U = ``run_steps`` / N updates the step size of update
