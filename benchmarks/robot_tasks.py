@@ -1,11 +1,17 @@
 """Episodes per second of each robot task next to the bare physics it needs.
 
 For every task in :data:`vslbook.envs.robot.TASKS` (or those named on the command line) this
-evaluates a batch of episodes with small random parameters in one process, counts the
-``mujoco.mj_step`` calls the batch made (physics steps, ``nstep`` included), and then times
-exactly that many bare ``mj_step`` calls on the task's own model. The ratio is the overhead
-of everything around the physics (trajectory generation, validity check, control, contacts,
-reward); the target is under 20 %. A second line evaluates the same batch through the worker
+evaluates a batch of episodes with small random parameters in one process and counts the
+``mujoco.mj_step`` calls the batch made (physics steps, ``nstep`` included). A second,
+untimed pass records MuJoCo's integration state (positions, velocities, controls, applied
+forces, warm start, ...) before every one of those steps; the bare physics is then timed by
+replaying exactly those steps, ``mj_setState`` + ``mj_step`` each, less the time of the
+``mj_setState`` calls alone. So the bare time is that of the very steps the episodes took,
+contacts and all. The ratio is the overhead of everything around the physics (trajectory
+generation, validity check, control, reward); the target is under 20 %. (Timing the same
+number of steps from the model's default, uncontrolled state instead, as this benchmark
+once did, misjudges the physics: table tennis's episode steps cost about 20 % more than
+those, mini golf's about twice as much.) A second line evaluates the same batch through the worker
 pool (``--workers``, default: the machine's cores). ``--repeat N`` times the batch and the
 bare steps N times each and keeps the fastest of each (steadier on a machine shared with
 other jobs).
@@ -27,20 +33,39 @@ import numpy as np
 from vslbook.envs.robot import TASKS, make_task
 from vslbook.envs.robot.task import resolve_workers
 
+_STATE = mujoco.mjtState.mjSTATE_INTEGRATION
+
 
 class _CountSteps:
     """Wraps ``mujoco.mj_step`` (and ``mj_step2``, the second half of a split step) and
-    counts physics steps, ``nstep`` included."""
+    counts physics steps, ``nstep`` included; with ``record`` it also keeps the model and the
+    integration state before every ``mj_step``, and before every ``mj_step2`` (beer pong
+    pins the ball between ``mj_step1`` and ``mj_step2``: a full step from the state with the
+    pin applied costs what the episode's split step cost)."""
 
-    def __init__(self) -> None:
+    def __init__(self, record: bool = False) -> None:
         self.real, self.real2 = mujoco.mj_step, mujoco.mj_step2
         self.steps = 0
+        self.record = record
+        self.states: list[tuple[mujoco.MjModel, np.ndarray]] = []
 
     def step(self, model, data, nstep: int = 1) -> None:
+        if self.record:
+            for _ in range(int(nstep)):
+                state = np.empty(mujoco.mj_stateSize(model, _STATE))
+                mujoco.mj_getState(model, data, state, _STATE)
+                self.states.append((model, state))
+                self.real(model, data)
+            self.steps += int(nstep)
+            return
         self.steps += int(nstep)
         self.real(model, data, nstep)
 
     def step2(self, model, data) -> None:
+        if self.record:
+            state = np.empty(mujoco.mj_stateSize(model, _STATE))
+            mujoco.mj_getState(model, data, state, _STATE)
+            self.states.append((model, state))
         self.steps += 1
         self.real2(model, data)
 
@@ -52,15 +77,23 @@ class _CountSteps:
         mujoco.mj_step, mujoco.mj_step2 = self.real, self.real2
 
 
-def _model_of(task) -> mujoco.MjModel | None:
-    """The task's MuJoCo model: an attribute, or an attribute of one of its attributes."""
-    for value in vars(task).values():
-        if isinstance(value, mujoco.MjModel):
-            return value
-        inner = getattr(value, "model", None)
-        if isinstance(inner, mujoco.MjModel):
-            return inner
-    return None
+def _bare_physics(states: list[tuple[mujoco.MjModel, np.ndarray]], repeat: int) -> float:
+    """Seconds of the recorded steps alone: (set state + step) less (set state), fastest of
+    ``repeat``."""
+    datas = {id(model): mujoco.MjData(model) for model, _ in states}
+    best = math.inf
+    for _ in range(repeat):
+        start = time.perf_counter()
+        for model, state in states:
+            data = datas[id(model)]
+            mujoco.mj_setState(model, data, state, _STATE)
+            mujoco.mj_step(model, data)
+        replay = time.perf_counter() - start
+        start = time.perf_counter()
+        for model, state in states:
+            mujoco.mj_setState(model, datas[id(model)], state, _STATE)
+        best = min(best, replay - (time.perf_counter() - start))
+    return best
 
 
 #: A typical valid θ needs the learned duration / start time inside its bounds.
@@ -87,19 +120,15 @@ def bench(name: str, episodes: int, workers: int, scale: float, seed: int, repea
             out = task.evaluate(theta, contexts, workers=0)
             wall = min(wall, time.perf_counter() - start)
     line = f"{name:28s} {episodes / wall:10.1f} episodes/s  ({out.n_executed} executed)"
-    model = _model_of(task)
-    if model is not None and counter.steps:
-        bare = math.inf
-        for _ in range(repeat):
-            data = mujoco.MjData(model)
-            start = time.perf_counter()
-            for _ in range(counter.steps):
-                mujoco.mj_step(model, data)
-            # (the model's default state, uncontrolled: its steps can cost more or less than
-            # the episodes' (mini golf's about twice as much, table tennis's about 20 % more,
-            # measured by replaying episodes' controls with mujoco.rollout), so the overhead
-            # printed is approximate and can be negative)
-            bare = min(bare, time.perf_counter() - start)
+    if counter.steps:
+        with _CountSteps(record=True) as recorder:
+            task.evaluate(theta, contexts, workers=0)
+        if recorder.steps != counter.steps or len(recorder.states) != counter.steps:
+            raise RuntimeError(
+                f"{name}: the recording pass took {recorder.steps} steps "
+                f"({len(recorder.states)} recorded), the timed pass {counter.steps}"
+            )
+        bare = _bare_physics(recorder.states, repeat)
         line += (
             f"; physics {counter.steps / episodes:.0f} steps/episode, bare mj_step "
             f"{counter.steps / bare:9.0f} steps/s, overhead {100 * (wall - bare) / bare:5.1f} %"
