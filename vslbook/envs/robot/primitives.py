@@ -16,6 +16,7 @@ the grid, so weights of different basis functions move the trajectory by similar
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 import torch
@@ -126,14 +127,13 @@ class ProDMPSpec:
         dq = np.zeros((n + 1, self.n_dof))
         if start >= n:
             return q, dq
-        dmp = ProDMP(
-            self.n_basis, self.n_dof, duration=(n - start) * self.dt, dt=self.dt,
-            alpha=self.alpha, tau=tau, alpha_x=self.alpha_phase, width=self.width,
+        dmp, peak = _prodmp(
+            self.n_basis, self.n_dof, (n - start) * self.dt, self.dt, self.alpha, tau,
+            self.alpha_phase, self.width,
         )  # fmt: skip
         w = w * self.weights_scale
         if self.auto_scale_basis:
-            peak = dmp.basis_matrix()[:, : self.n_basis].abs().amax(dim=0).numpy()
-            w = w / np.where(peak > 0, peak, 1.0)
+            w = w / peak
         if self.goal == "learned":
             goal = g * self.goal_scale
         elif self.goal == "relative":
@@ -148,6 +148,31 @@ class ProDMPSpec:
         q[start:] = pos.numpy()[: n + 1 - start]
         dq[start:] = vel.numpy()[: n + 1 - start]
         return q, dq
+
+
+@lru_cache(maxsize=16)
+def _prodmp(
+    n_basis: int,
+    n_dof: int,
+    duration: float,
+    dt: float,
+    alpha: float,
+    tau: float,
+    alpha_phase: float,
+    width: float | None,
+) -> tuple[ProDMP, np.ndarray]:
+    """The ProDMP of one (duration, τ) and its basis functions' largest absolute values on
+    the grid (1 where a basis function is zero everywhere).
+
+    Building the basis integrates it numerically (about a millisecond); a task whose τ and
+    start time are fixed builds it once. A :class:`ProDMP` is not changed by its use.
+    """
+    dmp = ProDMP(
+        n_basis, n_dof, duration=duration, dt=dt, alpha=alpha, tau=tau, alpha_x=alpha_phase,
+        width=width,
+    )  # fmt: skip
+    peak = dmp.basis_matrix()[:, :n_basis].abs().amax(dim=0).numpy()
+    return dmp, np.where(peak > 0, peak, 1.0)
 
 
 def promp_trajectory(
