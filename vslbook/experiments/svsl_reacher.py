@@ -99,9 +99,18 @@ def reacher_counts(budget: Budget | str | None = None) -> dict[str, Any]:
     ``full`` is the thesis's: N = 40, K = 250 / 250 / 800 (Table A.4), 20 seeds. The PPO
     length of Fig. 3.5 is not stated; ours is :class:`~vslbook.erl.ppo.PPOConfig`'s default,
     300 updates of N = 16384 steps (4,915,200 steps, 24,576 episodes). ``reduced`` keeps
-    30 % of K with 2 experts and 6 PPO updates; ``smoke`` 1 expert, K = 5 and one PPO
-    update on Eq. 3.8 only. ``eval_goals`` is the number of fixed evaluation goals (both
-    methods); ``svsl_test_every`` / ``ppo_eval_every`` the evaluation schedule.
+    30 % of K with 2 experts and 60 PPO updates (4,915 episodes); ``smoke`` 1 expert, K = 5
+    and one PPO update on Eq. 3.8 only.
+
+    Why 60 at ``reduced``: PPO's evaluation return on Eq. 3.8 first falls (seed 0: -91 at
+    the start, -155 after 9 updates, while the value function and the observation
+    statistics settle) and passes the reduced SVSL (-83 to -57 over three seeds) only after
+    about 30 updates; it is -50 after 40 and -30 after 57. On Eq. 3.10 it is still about
+    -10,000 after 42 updates, far below SVSL. With 6 updates PPO was behind SVSL on every
+    reward, so the reduced figure could not show the thesis's Eq. 3.8 result.
+
+    ``eval_goals`` is the number of fixed evaluation goals (both methods);
+    ``svsl_test_every`` / ``ppo_eval_every`` the evaluation schedule.
     """
     b = get_budget(budget)
     steps = PPOConfig().n_rollout_steps
@@ -114,11 +123,11 @@ def reacher_counts(budget: Budget | str | None = None) -> dict[str, Any]:
             full={"3.8": 250, "3.9": 250, "3.10": 800},
         ),
         "weight_iterations": b.pick(smoke=0, reduced=100, full=100),
-        "ppo_steps": b.pick(smoke=steps, reduced=6 * steps, full=300 * steps),
+        "ppo_steps": b.pick(smoke=steps, reduced=60 * steps, full=300 * steps),
         "ppo_rewards": b.pick(smoke=("3.8",), reduced=REWARDS, full=REWARDS),
         "eval_goals": b.pick(smoke=10, reduced=50, full=200),
         "svsl_test_every": b.pick(smoke=1, reduced=25, full=50),
-        "ppo_eval_every": b.pick(smoke=steps, reduced=steps, full=10 * steps),
+        "ppo_eval_every": b.pick(smoke=steps, reduced=5 * steps, full=10 * steps),
     }
 
 
