@@ -17,8 +17,16 @@ With ``--seeds S`` a second table times the same schedule for S seeds in one pro
 through the same path: updates per second per seed and in aggregate, and the wall time of S
 seeds' update against one seed's (the target of 1.5x is a CPU with 2 cores at 4x256).
 
+With ``--run-set BUDGET`` it instead trains the Chapter 5 notebook's live run sets
+(:func:`vslbook.experiments.dime_runs.chapter5_run_sets`: cheetah-run, the Pendulum
+ablations, the point-mass α panels) at that budget from scratch in ``--root`` (default: a
+new temporary folder) and prints the wall time of each set and of all of them, i.e. what
+the notebook's training costs at that budget (the seeds of a variant train together on the
+seed axis where the algorithm can).
+
     python benchmarks/dime_throughput.py --device cpu --steps 30 --seconds 60
     python benchmarks/dime_throughput.py --configs 4x256 --seeds 3
+    python benchmarks/dime_throughput.py --run-set reduced
 """
 
 from __future__ import annotations
@@ -26,7 +34,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import os
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -179,6 +189,34 @@ def measure_seeds(
             "ms_per_update": 1e3 * wall / n}  # fmt: skip
 
 
+def time_run_sets(budget_name: str, root: str | None) -> None:
+    """Train the Chapter 5 run sets at ``budget_name`` in ``root`` and print their wall times."""
+    from vslbook.budget import get_budget
+    from vslbook.experiments.dime_runs import chapter5_run_sets
+
+    budget = get_budget(budget_name)
+    base = Path(root) if root else Path(tempfile.mkdtemp(prefix="ch5-run-set-"))
+    if (base / "runs").exists() and any((base / "runs").iterdir()):
+        print(f"note: {base / 'runs'} already holds runs; finished ones are reused, not timed")
+    print(f"Chapter 5 run sets at budget {budget.name!r} ({budget.seeds} seeds) in {base}")
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    total = 0.0
+    for name, run_set in chapter5_run_sets(budget).items():
+        start = time.perf_counter()
+        out = run_set.run(budget, base / "runs", base / "tables" / name, progress=False)
+        wall = time.perf_counter() - start
+        total += wall
+        n_runs = sum(len(r) for r in out.runs.values())
+        print(
+            f"{name:10s} {run_set.env:30s} {len(run_set.variants)} variant(s) x "
+            f"{run_set.seeds} seed(s) = {n_runs} runs, {wall / 60:6.1f} min",
+            flush=True,
+        )
+        if out.unusable:
+            print(f"{'':10s} not finished: {out.unusable}")
+    print(f"{'all':10s} {total / 60:6.1f} min")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--device", default="auto", help="auto | cpu | cuda | cuda:N")
@@ -194,7 +232,17 @@ def main() -> None:
     parser.add_argument(
         "--seeds", type=int, default=0, help="also time S seeds in one process (seed axis)"
     )
+    parser.add_argument(
+        "--run-set", metavar="BUDGET", default=None,
+        help="time the Chapter 5 run sets at this budget instead (smoke | reduced | full)",
+    )  # fmt: skip
+    parser.add_argument("--root", default=None, help="folder for --run-set (default: a temp dir)")
     args = parser.parse_args()
+    if args.run_set is not None:
+        if args.threads:
+            torch.set_num_threads(args.threads)
+        time_run_sets(args.run_set, args.root)
+        return
     if args.steps < 1 or args.seconds <= 0:
         parser.error(f"need --steps >= 1 and --seconds > 0, got {args.steps}, {args.seconds}")
 

@@ -42,7 +42,7 @@ from IPython.display import display
 import vslbook
 from vslbook.bounds import dime as D
 from vslbook.budget import get_budget
-from vslbook.experiments.dime_runs import load_agent, run_variants
+from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
 from vslbook.plots import learning_curve, method_color, save_figure, thesis_vs_ours, use_style
 from vslbook.results import paper_curves
 from vslbook.srl.dime_config import DIMEConfig, describe_differences, named_config
@@ -78,6 +78,9 @@ LIVE = {"dmc": os.environ.get("VSLBOOK_DIME_CONFIG", "cpu-256"),
         "small": os.environ.get("VSLBOOK_DIME_CONFIG", "cpu-64")}
 for use, name in LIVE.items():
     print(f"{use:6s} {name:8s} {describe_differences(named_config(name), DIMEConfig)}")
+# the live run sets of Sections 4, 5 and 5b (environments, variants, seeds, counts):
+# vslbook.experiments.dime_runs.chapter5_run_sets, also timed by benchmarks/dime_throughput.py
+RUN_SETS = chapter5_run_sets(budget, dmc=LIVE["dmc"], small=LIVE["small"])
 
 # %% [markdown]
 # ## 1. The entropy lower bound
@@ -1055,14 +1058,10 @@ plt.show()
 
 # %%
 ENV = "dm_control/cheetah-run-v0"
-cheetah = run_variants(
-    ENV,
-    {"DIME": ("dime", {})},
-    # total_steps is the thesis's count (1M), scaled by the budget; evaluation every 24k
-    # steps at `full` (as published), every 6k at `reduced`, once at the end at `smoke`.
-    common={**named_config(LIVE["dmc"]), "total_steps": 1_000_000,
-            "eval_every": budget.pick(smoke=1_000_000, reduced=120_000, full=24_000)},
-    seeds=budget.seeds, budget=budget, root=RUNS, tables=TABLES / f"ch5-cheetah-{budget.name}")
+# total_steps is the thesis's count (1M), scaled by the budget; evaluation every 24k steps
+# at `full` (as published), every 6k at `reduced`, once at the end at `smoke`.
+assert RUN_SETS["cheetah"].env == ENV
+cheetah = RUN_SETS["cheetah"].run(budget, RUNS, TABLES / f"ch5-cheetah-{budget.name}")
 ours_curve = iqm_curve(cheetah.curve_rows().rename(columns={"step": "env_steps"}),
                        x="env_steps", y="value", run="run", reps=budget.bootstrap_reps)
 published = iqm_curve(paper_curves("dmc_cheetah_run"), reps=budget.bootstrap_reps)
@@ -1111,22 +1110,10 @@ display(side.round(1))
 # and which way it points on this task, not the thesis's rankings.
 
 # %%
-variants = {
-    "DIME": ("dime", {}),
-    "2 steps": ("dime", {"n_diffusion_steps": 2}),
-    "fixed α = 0.1": ("dime", {"fixed_alpha": 0.1}),
-    "Gaussian": ("dime-gaussian", {}),
-    "no distr. Q": ("dime", {"critic": "scalar"}),
-    "GB": ("dime", {"general_bridges": True}),
-    "fixed β": ("dime", {"learn_beta": False}),
-    "CrossQ": ("crossq", {}),
-}
-steps = budget.pick(smoke=5_050, reduced=8_000, full=100_000)  # env steps at this budget
-common = {**named_config(LIVE["small"]), "total_steps": budget.full_count(steps),
-          "eval_every": budget.full_count(budget.pick(smoke=5_050, reduced=1_000, full=5_000)),
-          "v_min": -1600.0, "v_max": 100.0}
-abl = run_variants("Pendulum-v1", variants, seeds=budget.seeds, budget=budget, root=RUNS,
-                   tables=TABLES / f"ch5-ablations-{budget.name}", common=common)
+# 5050 env steps at `smoke`, 8000 at `reduced`, 100k at `full`; budget.seeds seeds
+variants = RUN_SETS["ablations"].variants
+print({k: v for k, v in RUN_SETS["ablations"].common.items() if k in ("total_steps", "eval_every")})
+abl = RUN_SETS["ablations"].run(budget, RUNS, TABLES / f"ch5-ablations-{budget.name}")
 rows_all = abl.curve_rows()
 curves = {label: iqm_curve(rows_all[rows_all.variant == label], x="step", y="value", run="run",
                            reps=budget.bootstrap_reps) for label in variants}
@@ -1172,16 +1159,13 @@ print(final.groupby("variant").agg(["mean", "min", "max", "count"]).round(1).to_
 
 # %%
 from vslbook.envs.point_mass import GOALS
+from vslbook.experiments.dime_runs import POINT_MASS_ALPHAS as alphas
 
-alphas = (0.01, 1.0, 5.0)  # the thesis's panels run from small α up to 4 and 5
-pm_steps = budget.pick(smoke=5_050, reduced=10_000, full=100_000)
-pm_variants = {f"α = {a:g}": ("dime", {"fixed_alpha": a}) for a in alphas}
-# One seed per α: the figure shows one agent's value map and rollouts, as the thesis's does.
-pm = run_variants("vslbook/PointMassFourGoals-v0", pm_variants, seeds=1, budget=budget,
-                  root=RUNS, tables=TABLES / f"ch5-pointmass-{budget.name}",
-                  common={**named_config(LIVE["small"]), "use_target_network": True,
-                          "total_steps": budget.full_count(pm_steps),
-                          "eval_every": budget.full_count(pm_steps)})
+# the thesis's panels run from small α up to 4 and 5; one seed per α: the figure shows one
+# agent's value map and rollouts, as the thesis's does (10k env steps at `reduced`)
+pm_variants = RUN_SETS["pointmass"].variants
+pm_steps = budget.scale(RUN_SETS["pointmass"].common["total_steps"])  # at this budget
+pm = RUN_SETS["pointmass"].run(budget, RUNS, TABLES / f"ch5-pointmass-{budget.name}")
 fig, axes = plt.subplots(1, len(alphas), figsize=(5 * len(alphas), 4.2))
 grid = np.stack(np.meshgrid(np.linspace(-1, 1, 50), np.linspace(-1, 1, 50)), -1).reshape(-1, 2)
 summary = {}

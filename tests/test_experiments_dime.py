@@ -71,3 +71,34 @@ def test_run_variants_rejects_bad_arguments(tmp_path):
         run_variants("Pendulum-v1", {"a": ("dime", {})}, seeds=0, root=tmp_path, tables=tmp_path)
     with pytest.raises(ValueError, match="variants is empty"):
         run_variants("Pendulum-v1", {}, seeds=1, root=tmp_path, tables=tmp_path)
+
+
+@pytest.mark.parametrize(
+    ("budget", "env_steps", "seeds"),
+    [("smoke", {"ablations": 5_050, "pointmass": 5_050}, 2),
+     ("reduced", {"ablations": 8_000, "pointmass": 10_000}, 3),
+     ("full", {"ablations": 100_000, "pointmass": 100_000}, 10)],
+)  # fmt: skip
+def test_chapter5_run_sets_scale_counts_only(budget, env_steps, seeds):
+    from vslbook.budget import get_budget
+    from vslbook.experiments.dime_runs import chapter5_run_sets
+    from vslbook.registry import config_from_record, get_algorithm
+    from vslbook.srl.dime_config import named_config
+
+    b = get_budget(budget)
+    sets = chapter5_run_sets(budget)
+    assert list(sets) == ["cheetah", "ablations", "pointmass"]
+    # each set's length at this budget, as the training loop scales it
+    for name, steps in env_steps.items():
+        assert b.scale(sets[name].common["total_steps"]) == steps
+    assert sets["cheetah"].common["total_steps"] == 1_000_000  # the thesis's count
+    assert sets["cheetah"].seeds == sets["ablations"].seeds == b.seeds == seeds
+    assert sets["pointmass"].seeds == 1
+    # the networks are the named configurations, whatever the budget
+    for name, config in (("cheetah", "cpu-256"), ("ablations", "cpu-64"), ("pointmass", "cpu-64")):
+        assert named_config(config).items() <= sets[name].common.items()
+    # every variant's overrides make a valid config of its algorithm
+    for run_set in sets.values():
+        for algo, overrides in run_set.variants.values():
+            spec = get_algorithm(algo)
+            config_from_record(spec.config, {**run_set.common, **overrides})

@@ -23,7 +23,7 @@ import pandas as pd
 from vslbook.budget import Budget, get_budget
 from vslbook.registry import get_algorithm
 from vslbook.results import RunDir, collect_runs, load_table
-from vslbook.srl.dime_config import describe_differences
+from vslbook.srl.dime_config import describe_differences, named_config
 from vslbook.training import run, run_seeds
 
 
@@ -150,6 +150,93 @@ def run_variants(
     evals = load_table("evals.csv.gz", tables)
     evals["variant"] = evals["run"].map(labels)
     return VariantRuns(evals, by_label, used)
+
+
+#: The ablation variants of the notebook's Section 5 on Pendulum-v1 (the thesis panel each
+#: stands for is in the notebook's table): label -> (algorithm, overrides).
+ABLATIONS: dict[str, tuple[str, dict[str, Any]]] = {
+    "DIME": ("dime", {}),
+    "2 steps": ("dime", {"n_diffusion_steps": 2}),
+    "fixed α = 0.1": ("dime", {"fixed_alpha": 0.1}),
+    "Gaussian": ("dime-gaussian", {}),
+    "no distr. Q": ("dime", {"critic": "scalar"}),
+    "GB": ("dime", {"general_bridges": True}),
+    "fixed β": ("dime", {"learn_beta": False}),
+    "CrossQ": ("crossq", {}),
+}
+#: The fixed α of the Fig. 5.7 point-mass panels (the thesis's run from small α up to 4, 5).
+POINT_MASS_ALPHAS = (0.01, 1.0, 5.0)
+
+
+@dataclass(frozen=True)
+class RunSet:
+    """One of Chapter 5's live run sets: what :func:`run_variants` trains for a figure."""
+
+    env: str
+    variants: dict[str, tuple[str, dict[str, Any]]]
+    seeds: int
+    common: dict[str, Any]
+
+    def run(
+        self,
+        budget: Budget | str | None,
+        root: str | Path,
+        tables: str | Path,
+        **kwargs: Any,
+    ) -> VariantRuns:
+        """:func:`run_variants` of this set (``kwargs``: ``progress``, ``reuse_stale``)."""
+        return run_variants(
+            self.env, self.variants, seeds=self.seeds, budget=budget, root=root,
+            tables=tables, common=self.common, **kwargs,
+        )  # fmt: skip
+
+
+def chapter5_run_sets(
+    budget: Budget | str | None = None, *, dmc: str = "cpu-256", small: str = "cpu-64"
+) -> dict[str, RunSet]:
+    """The live run sets of the Chapter 5 notebook at ``budget``, by name.
+
+    * ``"cheetah"``: DIME on DeepMind Control cheetah-run next to the published curve, the
+      thesis's 1M steps scaled by the budget, ``budget.seeds`` seeds, evaluated every 24k
+      steps at ``full`` (as published), every 6k at ``reduced`` (120k scaled), once at
+      ``smoke``; network ``dmc``.
+    * ``"ablations"``: :data:`ABLATIONS` on Pendulum-v1, ``budget.seeds`` seeds, 100k steps
+      at ``full`` / 8k at ``reduced`` / 5050 at ``smoke`` (Table C.2's 5000 exploration
+      steps included), value range [-1600, 100]; network ``small``.
+    * ``"pointmass"``: Fig. 5.7, DIME with a target network and each fixed α of
+      :data:`POINT_MASS_ALPHAS`, one seed (the figure shows one agent), 100k / 10k / 5050
+      steps; network ``small``.
+
+    ``dmc`` and ``small`` are named configurations
+    (:data:`vslbook.srl.dime_config.NAMED_CONFIGS`); only counts depend on the budget.
+    """
+    b = get_budget(budget)
+    ablation_steps = b.pick(smoke=5_050, reduced=8_000, full=100_000)
+    pm_steps = b.pick(smoke=5_050, reduced=10_000, full=100_000)
+    return {
+        "cheetah": RunSet(
+            "dm_control/cheetah-run-v0",
+            {"DIME": ("dime", {})},
+            b.seeds,
+            {**named_config(dmc), "total_steps": 1_000_000,
+             "eval_every": b.pick(smoke=1_000_000, reduced=120_000, full=24_000)},
+        ),  # fmt: skip
+        "ablations": RunSet(
+            "Pendulum-v1",
+            dict(ABLATIONS),
+            b.seeds,
+            {**named_config(small), "total_steps": b.full_count(ablation_steps),
+             "eval_every": b.full_count(b.pick(smoke=5_050, reduced=1_000, full=5_000)),
+             "v_min": -1600.0, "v_max": 100.0},
+        ),  # fmt: skip
+        "pointmass": RunSet(
+            "vslbook/PointMassFourGoals-v0",
+            {f"α = {a:g}": ("dime", {"fixed_alpha": a}) for a in POINT_MASS_ALPHAS},
+            1,
+            {**named_config(small), "use_target_network": True,
+             "total_steps": b.full_count(pm_steps), "eval_every": b.full_count(pm_steps)},
+        ),  # fmt: skip
+    }
 
 
 def load_agent(run_dir: RunDir):
