@@ -9,8 +9,11 @@ import numpy as np
 import pytest
 
 from vslbook.envs.robot.mini_golf import (
+    D_GAINS,
     HORIZON,
+    P_GAINS,
     Q0,
+    TORQUE_MAX,
     MiniGolf,
     final_reward,
     invalid_penalty,
@@ -301,3 +304,112 @@ def test_found_theta_survives_a_small_perturbation(task: MiniGolf) -> None:
     r = task.evaluate(th, CTX_PASS, workers=0)
     assert r.executed.all() and np.all(np.isfinite(r.returns))
     assert r.success.all()  # the pass is not a knife-edge of θ
+
+
+# -- the substep loop against the plain reading of the events -----------------------------
+def _plain_simulate(task: MiniGolf, q_d: np.ndarray, dq_d: np.ndarray, context: np.ndarray):
+    """One episode the plain way: after every substep the breakdown tests, the hit
+    (``_club_contact``), passed and the positions, in the order of the module docstring.
+    Returns the trace's fields, the physics steps, the path and the substep of the hit."""
+    m, d = task.model, task.data
+    task.reset(context)
+    ball_id, tip_id = m.body("ball").id, m.site("rod_tip").id
+    start = d.xpos[ball_id].copy(), d.site_xpos[tip_id].copy()
+    points, balls, tips, torques = [start], [], [], []
+    hit = passed = broken = False
+    steps, hit_at = 0, None
+    for t in range(HORIZON):
+        a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
+        torque = 10.0 * np.clip(a, -1.0, 1.0)
+        torques.append(torque)
+        d.ctrl[:] = np.clip(torque + d.qfrc_bias[:7], -TORQUE_MAX, TORQUE_MAX)
+        for _ in range(10):
+            mujoco.mj_step(m, d)
+            steps += 1
+            bad = d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number > 0
+            if bad or not np.all(np.isfinite(d.qpos)):
+                broken = True
+                break
+            if not hit:
+                hit = task._club_contact()
+                hit_at = len(balls) if hit else None
+            elif not passed:
+                passed = bool(d.xpos[ball_id][1] - 0.025 < -0.75)
+            balls.append(d.xpos[ball_id].copy())
+            tips.append(d.site_xpos[tip_id].copy())
+        if broken:
+            break
+        points.append((d.xpos[ball_id].copy(), d.site_xpos[tip_id].copy()))
+    fields = {
+        "ball": np.array(balls or [start[0]]), "rod_tip": np.array(tips or [start[1]]),
+        "torque": np.array(torques), "hit": hit, "passed": passed and not broken,
+        "unstable": broken, "steps": t + 1,
+    }  # fmt: skip
+    return fields, steps, points, hit_at
+
+
+def _same_as_plain(task: MiniGolf, theta: np.ndarray, context: np.ndarray):
+    q_d, dq_d = task.mp.trajectory(theta, Q0)
+    want, want_steps, want_points, hit_at = _plain_simulate(task, q_d, dq_d, context)
+    before = task.physics_steps
+    got = task.simulate(q_d, dq_d, context)
+    assert task.physics_steps - before == want_steps
+    for k, v in want.items():
+        np.testing.assert_array_equal(getattr(got, k), v, err_msg=k)
+    path = task.path(theta, context)
+    np.testing.assert_array_equal(path["ball"], [p[0] for p in want_points])
+    np.testing.assert_array_equal(path["club"], [p[1] for p in want_points])
+    return got, hit_at
+
+
+def test_simulate_matches_the_plain_loop(task: MiniGolf) -> None:
+    passed, hit_at = _same_as_plain(task, THETA_PASS, CTX_PASS)
+    assert passed.hit and passed.passed and hit_at is not None
+    wall, _ = _same_as_plain(task, THETA_PASS, [*CTX_PASS[:3], CTX_PASS[3] + 0.05])
+    assert wall.hit and not wall.passed
+    rng = np.random.default_rng(4)
+    c = task.sample_contexts(2, rng)
+    for ctx in c:
+        th = np.r_[rng.uniform(0.5, 1.6), 0.3 * rng.normal(size=28)]
+        _same_as_plain(task, th, ctx)
+    # with a ten times longer physics step MuJoCo diverges in mid-episode
+    coarse = MiniGolf(joint_limit_check=False)
+    coarse.model.opt.timestep = 0.02
+    broke = [_same_as_plain(coarse, np.r_[0.5, 2.0 * rng.normal(size=28)], ctx)[0] for ctx in c]
+    assert any(tr.unstable for tr in broke)
+
+
+@pytest.mark.parametrize("when", ["first", "before_hit", "after_hit"])
+def test_non_finite_state_ends_the_episode_where_it_appeared(task: MiniGolf, when, monkeypatch):
+    """A NaN put into qpos after one physics step (and taken out before the next, so that
+    the swing goes on as before) ends the episode at that substep: the positions, the hit
+    and passed are those of the substeps before it."""
+    q_d, dq_d = task.mp.trajectory(THETA_PASS, Q0)
+    hit_at = _plain_simulate(task, q_d, dq_d, CTX_PASS)[3]
+    at = {"first": 0, "before_hit": hit_at - 3, "after_hit": hit_at + 40}[when]
+    real, calls, kept = mujoco.mj_step, [0], [0.0]
+
+    def step(m, d, nstep: int = 1) -> None:
+        for _ in range(nstep):
+            if calls[0] == at + 1:
+                d.qpos[2] = kept[0]
+            real(m, d)
+            if calls[0] == at:
+                kept[0], d.qpos[2] = d.qpos[2], np.nan
+            calls[0] += 1
+
+    monkeypatch.setattr(mujoco, "mj_step", step)
+    calls[0] = 0
+    want, want_steps, want_points, _ = _plain_simulate(task, q_d, dq_d, CTX_PASS)
+    calls[0] = 0
+    before = task.physics_steps
+    got = task.simulate(q_d, dq_d, CTX_PASS)
+    assert task.physics_steps - before == want_steps == at + 1
+    for k, v in want.items():
+        np.testing.assert_array_equal(getattr(got, k), v, err_msg=k)
+    assert got.unstable and not got.passed and got.hit == (when == "after_hit")
+    assert len(got.ball) == max(at, 1) and got.steps == at // 10 + 1
+    calls[0] = 0
+    path = task.path(THETA_PASS, CTX_PASS)
+    np.testing.assert_array_equal(path["ball"], [p[0] for p in want_points])
+    assert task.trace_return(got) == pytest.approx(_costs(got.torque[:-1]) - 50.0, rel=1e-12)

@@ -39,7 +39,8 @@ the step; the motor command is ``clip(10 a + qfrc_bias, ±[90, 90, 90, 90, 12, 1
 substeps). The model's motors have gear 1 and ``forcerange`` ±87 / ±12, so MuJoCo clips the
 first four joints further to ±87 N m, as in the authors' simulation of the same file.
 
-Reward (B.4.2.1, time-sparse; :func:`step_reward`), per step t ≤ T:
+Reward (B.4.2.1, time-sparse; :func:`step_reward` for one step, :func:`step_rewards` for all
+steps of an episode at once), per step t ≤ T:
 ``−R_rod − R_rod_rotation − 0.02 τ_t − err(q, q̇)`` with R_rod = clip(‖p − h_pos‖, 0.05, 10)
 (box to rod tip), R_rod_rotation = clip((2/π) arccos|h_rot · (0, 1, 0, 0)|, 0.25, 2),
 τ_t = Σ_i (10 a_i)² (the thesis calls it the "action (torque)" cost; the torque is 10 a,
@@ -119,7 +120,9 @@ def step_reward(
 ) -> float:  # fmt: skip
     """One step's reward of B.4.2.1 (see the module docstring); ``final`` adds the goal terms.
 
-    ``torque`` is the commanded torque 10 a (without the bias compensation).
+    ``torque`` is the commanded torque 10 a (without the bias compensation). The plain
+    reading of the formula: the step-based environment's reward, and the reference the tests
+    hold :func:`step_rewards` (what the episodes use) to.
     """
     r_rod = float(np.clip(np.linalg.norm(box_pos - rod_tip), 0.05, 10.0))
     cos_rod = min(abs(float(np.dot(rod_quat, ROD_QUAT_DESIRED))), 1.0)
@@ -134,6 +137,47 @@ def step_reward(
         r_goal = float(np.linalg.norm(box_pos - goal_pos))
         r_rot = math.acos(min(abs(float(np.dot(box_quat, goal_quat))), 1.0)) / math.pi
         r += -350.0 * r_goal - 200.0 * r_rot
+    return r
+
+
+def step_rewards(
+    box_pos: np.ndarray, box_quat: np.ndarray, goal_pos: np.ndarray, goal_quat: np.ndarray,
+    rod_tip: np.ndarray, rod_quat: np.ndarray, q: np.ndarray, dq: np.ndarray,
+    torque: np.ndarray, final: bool,
+) -> np.ndarray:  # fmt: skip
+    """:func:`step_reward` of T steps at once: row t of every ``(T, ·)`` argument is step t's
+    state (positions ``(T, 3)``, quaternions ``(T, 4)``, ``q``, ``dq``, ``torque`` ``(T, 7)``);
+    ``goal_pos`` (3,) and ``goal_quat`` (4,) are the context's. ``final`` adds the goal terms
+    to the last row. Returns the T rewards; the same numbers as :func:`step_reward` row by
+    row, up to rounding (one numpy expression per term instead of one call per step).
+    """
+    n = len(torque)
+    for name, a, width in (
+        ("box_pos", box_pos, 3), ("box_quat", box_quat, 4), ("rod_tip", rod_tip, 3),
+        ("rod_quat", rod_quat, 4), ("q", q, 7), ("dq", dq, 7), ("torque", torque, 7),
+    ):  # fmt: skip
+        if a.shape != (n, width):
+            raise ValueError(f"{name} must have shape ({n}, {width}) (T steps), got {a.shape}")
+    if np.shape(goal_pos) != (3,) or np.shape(goal_quat) != (4,):
+        raise ValueError(
+            f"goal_pos and goal_quat must have shapes (3,) and (4,), got "
+            f"{np.shape(goal_pos)} and {np.shape(goal_quat)}"
+        )
+    # R_rod = clip(‖p − h_pos‖, 0.05, 10), R_rod_rotation = clip((2/π) arccos|h_rot · (0,1,0,0)|,
+    # 0.25, 2), τ_t = Σ (10 a)², err = Σ(q − q_max)₊ + Σ(q_min − q)₊ + Σ(|q̇| − q̇_max)₊
+    r_rod = np.clip(np.linalg.norm(box_pos - rod_tip, axis=1), 0.05, 10.0)
+    cos_rod = np.minimum(np.abs(rod_quat @ ROD_QUAT_DESIRED), 1.0)
+    r_rod_rot = np.clip(2.0 / math.pi * np.arccos(cos_rod), 0.25, 2.0)
+    err = (
+        np.sum(np.maximum(q - Q_MAX, 0.0), axis=1)
+        + np.sum(np.maximum(Q_MIN - q, 0.0), axis=1)
+        + np.sum(np.maximum(np.abs(dq) - QD_MAX, 0.0), axis=1)
+    )
+    r = -r_rod - r_rod_rot - 0.02 * np.sum(np.square(torque), axis=1) - err
+    if final and n > 0:  # −350 R_goal − 200 R_rotation at t = T
+        r_goal = float(np.linalg.norm(box_pos[-1] - goal_pos))
+        r_rot = math.acos(min(abs(float(np.dot(box_quat[-1], goal_quat))), 1.0)) / math.pi
+        r[-1] += -350.0 * r_goal - 200.0 * r_rot
     return r
 
 
@@ -277,25 +321,62 @@ class BoxPushingObstacle(EpisodicTask):
                 )
         m, d = self.model, self.data
         gpos, gquat = self.reset(context)
-        ret, pos_err, rot_err = 0.0, math.nan, math.nan
+        # The loop only controls, steps, checks for a breakdown and copies what the reward
+        # reads (the state after each control step) into these arrays; the rewards of all
+        # steps follow at once (step_rewards). Views into MjData (its buffers never move):
+        qpos, q, dq, bias, ctrl = d.qpos, d.qpos[:7], d.qvel[:7], d.qfrc_bias[:7], d.ctrl
+        box_x, box_r = d.xpos[self._box_body], d.xquat[self._box_body]
+        tip_x, rod_r = d.site_xpos[self._rod_tip], d.xquat[self._rod_body]
+        box_pos, box_quat = np.empty((HORIZON, 3)), np.empty((HORIZON, 4))
+        tip_pos, rod_quat = np.empty((HORIZON, 3)), np.empty((HORIZON, 4))
+        qs, dqs, torques = np.empty((HORIZON, 7)), np.empty((HORIZON, 7)), np.empty((HORIZON, 7))
+        warnings = d.warning.number
+        w_pos, w_vel, w_acc = (int(w) for w in _BAD_STATE)
+        e, f, neg_max = np.empty(7), np.empty(7), -TORQUE_MAX
+        sub, mul, add, mx, mn = np.subtract, np.multiply, np.add, np.maximum, np.minimum
+        dot, step = qpos.dot, mujoco.mj_step
         path = self._recorder
         if path is not None:
-            path(box=d.xpos[self._box_body], rod_tip=d.site_xpos[self._rod_tip])
+            path(box=box_x, rod_tip=tip_x)
+        n, broken = HORIZON, False  # n: steps whose state and reward count
         for t in range(HORIZON):
-            a = P_GAINS * (q_d[t + 1] - d.qpos[:7]) + D_GAINS * (dq_d[t + 1] - d.qvel[:7])
-            torque = apply_torque(m, d, a)
-            self.physics_steps += FRAME_SKIP
-            if unstable(d):
-                ret += UNSTABLE_STEP * (HORIZON - t)
-                pos_err = rot_err = math.nan
+            # a = clip(K_p (q_d − q) + K_d (q̇_d − q̇), −1, 1), torque 10 a,
+            # ctrl = clip(10 a + bias, ±limit) (apply_torque, in place)
+            mul(P_GAINS, sub(q_d[t + 1], q, e), e)
+            mul(D_GAINS, sub(dq_d[t + 1], dq, f), f)
+            mn(mx(add(e, f, e), -1.0, out=e), 1.0, out=e)
+            tq = torques[t]
+            mul(ACTION_SCALE, e, tq)
+            mn(mx(add(tq, bias, ctrl), neg_max, out=ctrl), TORQUE_MAX, out=ctrl)
+            step(m, d, FRAME_SKIP)
+            # unstable(d): a MuJoCo warning, or a non-finite qpos (q·q is finite unless an
+            # entry is not, or the sum overflows, which the exact test then clears)
+            v = dot(qpos)
+            if (
+                warnings[w_pos] > 0 or warnings[w_vel] > 0 or warnings[w_acc] > 0
+                or (v - v != 0.0 and not np.all(np.isfinite(qpos)))
+            ):  # fmt: skip
+                n, broken = t, True
                 break
-            r, pos_err, rot_err = self.state_reward(gpos, gquat, torque, t == HORIZON - 1)
-            ret += r
+            box_pos[t], box_quat[t], tip_pos[t], rod_quat[t] = box_x, box_r, tip_x, rod_r
+            qs[t], dqs[t] = q, dq
             if path is not None:
-                path(box=d.xpos[self._box_body], rod_tip=d.site_xpos[self._rod_tip])
+                path(box=box_x, rod_tip=tip_x)
+        self.physics_steps += FRAME_SKIP * (n + broken)  # the breaking step was taken too
+        rewards = step_rewards(
+            box_pos[:n], box_quat[:n], gpos, gquat, tip_pos[:n], rod_quat[:n], qs[:n],
+            dqs[:n], torques[:n], final=not broken,
+        )  # fmt: skip
+        ret = float(np.sum(rewards))
+        if broken:  # −50 for every remaining step, the breaking one included
+            ret += UNSTABLE_STEP * (HORIZON - n)
+            pos_err = rot_err = math.nan
+        else:
+            pos_err = float(np.linalg.norm(box_pos[-1] - gpos))
+            rot_err = rotation_distance(box_quat[-1], gquat)
         success = is_success(pos_err, rot_err)
         info = {"pos_error": pos_err, "rot_error": rot_err, "success": float(success)}
-        return Episode(float(ret), success, True, info)
+        return Episode(ret, success, True, info)
 
     def __repr__(self) -> str:
         return (

@@ -268,14 +268,12 @@ class MiniGolf(EpisodicTask):
         mujoco.mj_forward(m, d)
 
     def _club_contact(self) -> bool:
-        """Whether a contact of ``data`` pairs the ball with a club geom (a plain loop: the
-        contact list is short, and numpy's set routines cost more than the physics step)."""
+        """Whether a contact of ``data`` pairs the ball with a club geom: the plain reading of
+        the hit event. :meth:`simulate` runs the same test inline (cheaper per substep); the
+        tests use this method as its reference."""
         d = self.data
-        ncon = d.ncon
-        if ncon == 0:
-            return False
         ball, club = self._ball_geom, self._club_geoms
-        for g1, g2 in d.contact.geom[:ncon].tolist():
+        for g1, g2 in d.contact.geom[: d.ncon].tolist():
             if (g1 == ball or g2 == ball) and (g1 in club or g2 in club):
                 return True
         return False
@@ -299,27 +297,31 @@ class MiniGolf(EpisodicTask):
             d.qpos[self._ball_qpos : self._ball_qpos + 3] = ball_pos
         if ball_vel is not None:
             d.qvel[self._ball_qvel : self._ball_qvel + 3] = ball_vel
-        mujoco.mj_forward(m, d)
+        if ball_pos is not None or ball_vel is not None:  # (reset ran mj_forward already)
+            mujoco.mj_forward(m, d)
         goal = d.site_xpos[self._goal_site].copy()
         start_ball, start_tip = d.xpos[self._ball_body].copy(), d.site_xpos[self._rod_tip].copy()
+        # After every substep: qpos (tested for finiteness after the loop), ball and club tip
         n_sub = HORIZON * FRAME_SKIP
-        ball, tip = np.empty((n_sub, 3)), np.empty((n_sub, 3))
+        qs, ball, tip = np.empty((n_sub, m.nq)), np.empty((n_sub, 3)), np.empty((n_sub, 3))
         torques = np.empty((HORIZON, 7))
         bad, warnings = int(mujoco.mjtWarning.mjWARN_BADQACC), d.warning.number
-        hit = passed = unstable = False
+        hit = unstable = False
         i = t = 0
-        path = self._recorder
-        if path is not None:
-            path(ball=start_ball, club=start_tip)
+        i_hit = n_sub  # the substep of the first ball-club contact
         # Views into MjData (its buffers never move) and scratch arrays: the loop allocates
-        # nothing. The PD law, in place and in the order of the module docstring:
+        # nothing but the contact pairs it reads before the hit. The PD law, in place and in
+        # the order of the module docstring:
         # a = clip(K_p (q_d - q) + K_d (q̇_d - q̇), -1, 1), u = clip(10 a + bias, ±limit).
         qpos, q, dq, bias, ctrl = d.qpos, d.qpos[:7], d.qvel[:7], d.qfrc_bias[:7], d.ctrl
         ball_x, tip_x = d.xpos[self._ball_body], d.site_xpos[self._rod_tip]
+        contacts = d.contact  # MjData's contact list (its length follows ncon)
+        # a contact is a hit iff its (geom1, geom2) is one of these (_club_contact)
+        b, (c1, c2) = self._ball_geom, self._club_geoms
+        hit0, hit1, hit2, hit3 = [b, c1], [c1, b], [b, c2], [c2, b]
         e, f, neg_max = np.empty(7), np.empty(7), -TORQUE_MAX
         sub, mul, add, mx, mn = np.subtract, np.multiply, np.add, np.maximum, np.minimum
-        dot = qpos.dot
-        step, sub_steps, club_contact = mujoco.mj_step, range(FRAME_SKIP), self._club_contact
+        step, sub_steps = mujoco.mj_step, range(FRAME_SKIP)
         for t in range(HORIZON):
             mul(P_GAINS, sub(q_d[t + 1], q, e), e)
             mul(D_GAINS, sub(dq_d[t + 1], dq, f), f)
@@ -329,32 +331,43 @@ class MiniGolf(EpisodicTask):
             mn(mx(add(tq, bias, ctrl), neg_max, out=ctrl), TORQUE_MAX, out=ctrl)
             for _ in sub_steps:
                 step(m, d)
-                if warnings[bad] > 0:
+                if warnings[bad] > 0:  # MuJoCo reset the state after a bad acceleration
                     unstable = True
                     break
-                # all(isfinite(qpos)) at the cost of a dot product: q·q is finite unless an
-                # entry is not (or the sum overflows, which the exact test then clears)
-                v = dot(qpos)
-                if v - v != 0.0 and not np.all(np.isfinite(qpos)):
-                    unstable = True
-                    break
-                if not hit:
-                    hit = club_contact()
-                elif not passed:
-                    passed = bool(ball_x[1] - BALL_RADIUS < PASS_Y)
+                if not hit and d.ncon:
+                    pairs = contacts.geom.tolist()
+                    if hit0 in pairs or hit1 in pairs or hit2 in pairs or hit3 in pairs:
+                        hit, i_hit = True, i
+                qs[i] = qpos
                 ball[i] = ball_x
                 tip[i] = tip_x
                 i += 1
             if unstable:
                 break
-            if path is not None:
-                path(ball=ball_x, club=tip_x)
+        # A non-finite state ends the episode at the substep that produced it, as if tested
+        # right after that substep (tested here for all substeps at once, cheaper than in the
+        # loop): what was simulated after it is dropped. MuJoCo's own checks reset such a
+        # state at the next substep, so it never lasts.
+        finite = np.isfinite(qs[:i]).all(axis=1)
+        if not finite.all():
+            i = int(np.argmin(finite))
+            t, unstable = i // FRAME_SKIP, True
+            if i_hit >= i:
+                hit, i_hit = False, n_sub
         self.physics_steps += i + int(unstable)  # the unstable substep was taken as well
+        # passed: y_ball - radius < PASS_Y in a substep after the one of the hit
+        after_hit = ball[i_hit + 1 : i, 1]
+        passed = hit and not unstable and bool(np.any(after_hit - BALL_RADIUS < PASS_Y))
+        path = self._recorder
+        if path is not None:  # the start and the end of every control step before a breakdown
+            path(ball=start_ball, club=start_tip)
+            for k in range(FRAME_SKIP - 1, (t if unstable else HORIZON) * FRAME_SKIP, FRAME_SKIP):
+                path(ball=ball[k], club=tip[k])
         if i == 0:  # unstable in the very first substep: the start state is all there is
             ball[0], tip[0], i = start_ball, start_tip, 1
         return Trace(
             ball=ball[:i].copy(), rod_tip=tip[:i].copy(), torque=torques[: t + 1].copy(),
-            goal=goal, hit=hit, passed=passed and not unstable, unstable=unstable, steps=t + 1,
+            goal=goal, hit=hit, passed=passed, unstable=unstable, steps=t + 1,
         )  # fmt: skip
 
     def trace_return(self, trace: Trace) -> float:
