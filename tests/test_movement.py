@@ -7,7 +7,14 @@ import pytest
 import torch
 
 from vslbook.movement import DMP, ProDMP, ProMP
-from vslbook.movement.basis import canonical_phase, dmp_forcing_basis, normalized_rbf, time_grid
+from vslbook.movement.basis import (
+    canonical_phase,
+    dmp_forcing_basis,
+    dmp_forcing_basis_np,
+    normalized_rbf,
+    normalized_rbf_np,
+    time_grid,
+)
 
 
 def _random_cov(gen: torch.Generator, size: int, scale: float = 1.0) -> torch.Tensor:
@@ -324,3 +331,45 @@ def test_dmp_and_prodmp_reject_bad_shapes() -> None:
         prodmp.distribution(np.zeros(8), np.eye(6), np.zeros(2), np.zeros(2))
     with pytest.raises(ValueError, match=r"w must be array-like of numbers, got 'abc'"):
         ProMP(3, 2).trajectory("abc")
+
+
+# --------------------------------------------------------------------------- numpy paths
+def test_numpy_trajectories_equal_the_torch_ones() -> None:
+    """trajectory_numpy (what the robot tasks call) gives the torch path's numbers, batched."""
+    rng = np.random.default_rng(7)
+    prodmp = ProDMP(n_basis=3, n_dof=7, duration=2.0, dt=0.008, tau=0.9)
+    params, y0, dy0 = 50 * rng.normal(size=(5, 28)), rng.normal(size=(5, 7)), rng.normal(size=7)
+    pos, vel = prodmp.trajectory_numpy(params, y0, dy0)
+    want_pos, want_vel = prodmp.trajectory(params, y0, dy0)
+    assert isinstance(pos, np.ndarray) and pos.shape == vel.shape == (5, 251, 7)
+    np.testing.assert_allclose(pos, want_pos.numpy(), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(vel, want_vel.numpy(), rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(pos[:, 0], y0, atol=1e-12)  # the initial conditions hold
+    np.testing.assert_allclose(vel[:, 0], np.broadcast_to(dy0, (5, 7)), atol=1e-12)
+
+    promp = ProMP(n_basis=4, n_dof=3, duration=0.7, dt=0.001, width=0.1)
+    w = rng.normal(size=(2, 12))
+    pos, vel = promp.trajectory_numpy(w)
+    np.testing.assert_allclose(pos, promp.trajectory(w).numpy(), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(vel, promp.velocity(w).numpy(), rtol=1e-12, atol=1e-12)
+    central = (pos[:, 2:] - pos[:, :-2]) / (2 * promp.dt)  # velocities: d/dt of positions
+    assert np.abs(vel[:, 1:-1] - central).max() < 1e-3 * np.abs(vel).max()
+
+
+def test_numpy_trajectories_reject_bad_shapes() -> None:
+    prodmp, promp = ProDMP(n_basis=3, n_dof=2), ProMP(n_basis=3, n_dof=2)
+    with pytest.raises(ValueError, match=r"params must have shape \(\.\.\., 8\), got \(6,\)"):
+        prodmp.trajectory_numpy(np.zeros(6), np.zeros(2), np.zeros(2))
+    with pytest.raises(ValueError, match=r"dy0 must have shape \(\.\.\., 2\), got \(3,\)"):
+        prodmp.trajectory_numpy(np.zeros(8), np.zeros(2), np.zeros(3))
+    with pytest.raises(ValueError, match=r"w must have shape \(\.\.\., 6\), got \(5,\)"):
+        promp.trajectory_numpy(np.zeros(5))
+
+
+def test_basis_first_layouts() -> None:
+    s = np.linspace(-0.1, 1.1, 31)
+    first = normalized_rbf_np(s, 4, basis_first=True, derivative=True)
+    want = normalized_rbf_np(s, 4, derivative=True)
+    np.testing.assert_array_equal(np.moveaxis(first, 0, -1), want)
+    forcing = dmp_forcing_basis_np(s, 4, 2.0, 0.5, basis_first=True)
+    np.testing.assert_array_equal(forcing.T, dmp_forcing_basis(s, 4, 2.0, 0.5).numpy())

@@ -88,12 +88,16 @@ def time_grid(duration: float, dt: float, dtype: torch.dtype = torch.float64) ->
 
     The step is exactly ``dt``; the last time is the multiple of ``dt`` closest to ``duration``.
     """
+    return torch.from_numpy(time_grid_np(duration, dt)).to(dtype)
+
+
+def time_grid_np(duration: float, dt: float) -> np.ndarray:
+    """:func:`time_grid` as a float64 numpy array."""
     duration = _check_positive("duration", duration)
     dt = _check_positive("dt", dt)
     if dt > duration:
         raise ValueError(f"dt must not exceed duration={duration}, got dt={dt}")
-    n_steps = round(duration / dt)
-    return torch.arange(n_steps + 1, dtype=dtype) * dt
+    return np.arange(round(duration / dt) + 1, dtype=np.float64) * dt
 
 
 def canonical_phase(t: Array, alpha_x: float = 3.0, tau: float = 1.0) -> torch.Tensor:
@@ -135,19 +139,42 @@ def normalized_rbf(
 
     The normalisation is a softmax over the log-bumps, so it stays finite far from all centres.
     With ``u_i = -(s - c_i) / h^2`` the derivative is ``psi_i (u_i - sum_j psi_j u_j)``.
+    The basis is a constant of a primitive (no gradient flows through the phase): it is
+    computed in float64 by :func:`normalized_rbf_np` and returned in the phase's dtype.
+    """
+    phase = _as_tensor("phase", phase)
+    psi = normalized_rbf_np(phase.detach().cpu().numpy(), n_basis, width, derivative=derivative)
+    return torch.from_numpy(psi).to(phase.dtype)
+
+
+def normalized_rbf_np(
+    phase: np.ndarray,
+    n_basis: int,
+    width: float | None = None,
+    *,
+    derivative: bool = False,
+    basis_first: bool = False,
+) -> np.ndarray:
+    """:func:`normalized_rbf` in numpy, float64; ``basis_first`` puts the basis index first,
+    ``(n, *phase.shape)``.
+
+    The primitives' bases are computed here once per primitive; a robot task builds one
+    primitive per parameter vector (its duration or start time is learned), and on these small
+    arrays numpy's per-call cost is a fraction of torch's.
     """
     n_basis = _check_int("n_basis", n_basis)
     width = default_width(n_basis) if width is None else _check_positive("width", width)
-    phase = _as_tensor("phase", phase)
-    centers = rbf_centers(n_basis, dtype=phase.dtype).reshape(n_basis, *[1] * phase.dim())
-    # basis index first: a softmax over a short leading axis is several times faster than
-    # over a short trailing one (a (3500, 3) basis: 0.05 ms against 0.25 ms on one core)
-    diff = phase.unsqueeze(0) - centers
-    psi = torch.softmax(-0.5 * (diff / width) ** 2, dim=0)
+    phase = np.asarray(phase, dtype=np.float64)
+    centers = np.linspace(0.0, 1.0, n_basis).reshape(n_basis, *[1] * phase.ndim)
+    # basis index first: the softmax reduces over a short leading axis
+    diff = phase[None] - centers
+    logits = -0.5 * (diff / width) ** 2
+    psi = np.exp(logits - logits.max(axis=0))
+    psi /= psi.sum(axis=0)
     if derivative:
         u = -diff / width**2
-        psi = psi * (u - (psi * u).sum(dim=0, keepdim=True))
-    return psi.movedim(0, -1)
+        psi = psi * (u - (psi * u).sum(axis=0))
+    return psi if basis_first else np.moveaxis(psi, 0, -1)
 
 
 def dmp_forcing_basis(
@@ -163,8 +190,28 @@ def dmp_forcing_basis(
     function of the phase ``x`` alone, and it spreads the bumps evenly in time over
     ``[0, tau]`` (the usual choice of centres ``exp(-alpha_x c_i)`` in phase space). The forcing
     term of one degree of freedom is then ``f(x) = x phi(x)^T theta``. ``s`` is computed as
-    ``t / tau`` so that it stays finite after ``x`` underflows.
+    ``t / tau`` so that it stays finite after ``x`` underflows. Computed in float64 by
+    :func:`dmp_forcing_basis_np`, returned in the dtype of ``t``.
     """
     t = _as_tensor("t", t)
-    x = canonical_phase(t, alpha_x, tau)
-    return x.unsqueeze(-1) * normalized_rbf(t / tau, n_basis, width)
+    basis = dmp_forcing_basis_np(t.detach().cpu().numpy(), n_basis, alpha_x, tau, width)
+    return torch.from_numpy(basis).to(t.dtype)
+
+
+def dmp_forcing_basis_np(
+    t: np.ndarray,
+    n_basis: int,
+    alpha_x: float = 3.0,
+    tau: float = 1.0,
+    width: float | None = None,
+    *,
+    basis_first: bool = False,
+) -> np.ndarray:
+    """:func:`dmp_forcing_basis` in numpy, float64 (``x(t) = exp(-alpha_x t / tau)``, Eq. 2.45);
+    ``basis_first`` puts the basis index first, ``(n_basis, *t.shape)``."""
+    alpha_x = _check_positive("alpha_x", alpha_x)
+    tau = _check_positive("tau", tau)
+    t = np.asarray(t, dtype=np.float64)
+    x = np.exp(-alpha_x * t / tau)
+    psi = normalized_rbf_np(t / tau, n_basis, width, basis_first=True)
+    return x * psi if basis_first else np.moveaxis(x * psi, 0, -1)

@@ -29,6 +29,9 @@ The forcing convention is the one of :class:`~vslbook.movement.dmp.DMP` (no ``(g
 
 from __future__ import annotations
 
+from typing import TypeVar
+
+import numpy as np
 import torch
 
 from vslbook.movement.basis import (
@@ -38,15 +41,38 @@ from vslbook.movement.basis import (
     _check_int,
     _check_last_dim,
     _check_positive,
-    dmp_forcing_basis,
-    time_grid,
+    dmp_forcing_basis_np,
+    time_grid_np,
 )
 
+_A = TypeVar("_A", torch.Tensor, np.ndarray)
 
-def _cumulative_trapezoid(values: torch.Tensor, h: float) -> torch.Tensor:
-    """``int_0^{t_k} values dt`` along dim 0 for samples spaced ``h`` apart (trapezoid rule)."""
-    steps = 0.5 * h * (values[1:] + values[:-1])
-    return torch.cat([torch.zeros_like(values[:1]), torch.cumsum(steps, dim=0)])
+
+def _cumulative_trapezoid(values: np.ndarray, h: float) -> np.ndarray:
+    """``int_0^{t_k} values dt`` along the last axis for samples spaced ``h`` apart
+    (trapezoid rule)."""
+    out = np.empty_like(values)
+    out[..., 0] = 0.0
+    np.cumsum(0.5 * h * (values[..., 1:] + values[..., :-1]), axis=-1, out=out[..., 1:])
+    return out
+
+
+def _solve_initial(phi: _A, dphi: _A, y: _A, dy: _A, w_g: _A, y0: _A, dy0: _A) -> tuple[_A, _A]:
+    """Positions and velocities ``(..., T, n_dof)`` of parameters ``w_g (..., n_dof, P)``
+    from the bases ``Phi, Phi' (T, P)`` and ``[y1, y2], [y1', y2'] (T, 2)``: the particular
+    solution plus ``c1 y1 + c2 y2`` with ``c1, c2`` from ``y(t0) = y0``, ``y'(t0) = dy0``
+    (a 2x2 system solved by Cramer's rule; its determinant is the Wronskian). The same
+    expression for torch tensors (differentiable) and numpy arrays."""
+    pos_p = phi @ w_g.swapaxes(-1, -2)
+    vel_p = dphi @ w_g.swapaxes(-1, -2)
+    (y1, y2), (dy1, dy2) = y[0], dy[0]
+    wronskian = y1 * dy2 - y2 * dy1
+    r0, r1 = y0 - pos_p[..., 0, :], dy0 - vel_p[..., 0, :]
+    c1 = ((dy2 * r0 - y2 * r1) / wronskian)[..., None, :]
+    c2 = ((y1 * r1 - dy1 * r0) / wronskian)[..., None, :]
+    positions = y[:, :1] * c1 + y[:, 1:] * c2 + pos_p
+    velocities = dy[:, :1] * c1 + dy[:, 1:] * c2 + vel_p
+    return positions, velocities
 
 
 class ProDMP:
@@ -91,42 +117,47 @@ class ProDMP:
         self.substeps = _check_int("substeps", substeps)
         self.dtype = dtype
         self.n_params = self.n_dof * (self.n_basis + 1)
-        self.times = time_grid(self.duration, self.dt, dtype=dtype)
-
         a = self.alpha / (2.0 * self.tau)
-        if a * float(self.times[-1]) > 600.0:
+        t = time_grid_np(self.duration, self.dt)
+        if a * float(t[-1]) > 600.0:
             raise ValueError(
                 f"alpha * duration / (2 tau) must be at most 600 so that exp(a t) stays finite, "
-                f"got {a * float(self.times[-1]):.1f}"
+                f"got {a * float(t[-1]):.1f}"
             )
-        t = time_grid(self.duration, self.dt, dtype=torch.float64)
-        y1, y2 = torch.exp(-a * t), t * torch.exp(-a * t)
-        dy1, dy2 = -a * y1, (1.0 - a * t) * torch.exp(-a * t)
+        self.times = torch.from_numpy(t).to(dtype)
+        # The bases are computed once, in float64 numpy (see basis.normalized_rbf_np).
+        decay = np.exp(-a * t)
+        y1, y2 = decay, t * decay
+        dy1, dy2 = -a * y1, (1.0 - a * t) * decay
 
         # p1, p2 on a grid `substeps` times finer than `times`, then read off at `times`.
         h = self.dt / self.substeps
-        fine = torch.arange((len(t) - 1) * self.substeps + 1, dtype=torch.float64) * h
-        forcing = dmp_forcing_basis(fine, self.n_basis, self.alpha_x, self.tau, self.width)
-        forcing = forcing / self.tau**2
-        grow = torch.exp(a * fine).unsqueeze(-1)
-        p1 = _cumulative_trapezoid(fine.unsqueeze(-1) * grow * forcing, h)[:: self.substeps]
-        p2 = _cumulative_trapezoid(grow * forcing, h)[:: self.substeps]
+        fine = np.arange((len(t) - 1) * self.substeps + 1, dtype=np.float64) * h
+        # (basis, time) layout: the integrals run along contiguous rows
+        forcing = dmp_forcing_basis_np(
+            fine, self.n_basis, self.alpha_x, self.tau, self.width, basis_first=True
+        )
+        integrand = np.exp(a * fine) * forcing / self.tau**2
+        p2 = _cumulative_trapezoid(integrand, h)[:, :: self.substeps].T
+        p1 = _cumulative_trapezoid(fine * integrand, h)[:, :: self.substeps].T
 
-        ones, zeros = torch.ones_like(t).unsqueeze(-1), torch.zeros_like(t).unsqueeze(-1)
-        phi = torch.cat([y2[:, None] * p2 - y1[:, None] * p1, ones], dim=-1)
-        dphi = torch.cat([dy2[:, None] * p2 - dy1[:, None] * p1, zeros], dim=-1)
-        homogeneous = torch.stack([y1, y2], dim=-1)
-        d_homogeneous = torch.stack([dy1, dy2], dim=-1)
-
-        self._phi, self._dphi = phi.to(dtype), dphi.to(dtype)
-        self._y, self._dy = homogeneous.to(dtype), d_homogeneous.to(dtype)
+        ones, zeros = np.ones((len(t), 1)), np.zeros((len(t), 1))
+        phi = np.concatenate([y2[:, None] * p2 - y1[:, None] * p1, ones], axis=1)
+        dphi = np.concatenate([dy2[:, None] * p2 - dy1[:, None] * p1, zeros], axis=1)
+        homogeneous = np.stack([y1, y2], axis=-1)
+        d_homogeneous = np.stack([dy1, dy2], axis=-1)
+        self._np = (phi, dphi, homogeneous, d_homogeneous)  # float64, for trajectory_numpy
+        self._phi, self._dphi = (torch.from_numpy(v).to(dtype) for v in (phi, dphi))
+        self._y, self._dy = (torch.from_numpy(v).to(dtype) for v in self._np[2:])
+        for arr in self._np:  # shared with the float64 tensors: neither is ever written
+            arr.flags.writeable = False
 
         # Positions as one linear map of (w_g, y0, dy0): with M = [[y1, y2], [y1', y2']](t0)
         # and B0 = [Phi(t0), Phi'(t0)], c = M^-1 ([y0, dy0] - B0 w_g), hence
         # y(t) = (Phi(t)^T - [y1, y2](t) M^-1 B0) w_g + [y1, y2](t) M^-1 [y0, dy0].
-        m_inv = torch.linalg.inv(torch.stack([homogeneous[0], d_homogeneous[0]]))
+        m_inv = np.linalg.inv(np.stack([homogeneous[0], d_homogeneous[0]]))
         init = homogeneous @ m_inv
-        self._param_map = (phi - init @ torch.stack([phi[0], dphi[0]])).to(dtype)
+        self._param_map = torch.from_numpy(phi - init @ np.stack([phi[0], dphi[0]])).to(dtype)
 
     def basis_matrix(self, derivative: bool = False) -> torch.Tensor:
         """Position basis ``Phi(t) = [y2 p2 - y1 p1, 1]`` on :attr:`times`, ``(T, n_basis + 1)``.
@@ -161,19 +192,23 @@ class ProDMP:
         params = self._params(params)
         y0, dy0 = self._check_state(y0, dy0)
         w_g = params.reshape(*params.shape[:-1], self.n_dof, self.n_basis + 1)
-        pos_p = torch.einsum("tp,...dp->...td", self._phi, w_g)
-        vel_p = torch.einsum("tp,...dp->...td", self._dphi, w_g)
+        return _solve_initial(self._phi, self._dphi, self._y, self._dy, w_g, y0, dy0)
 
-        # Solve [[y1, y2], [y1', y2']](t0) [c1, c2] = [y0 - y_p(t0), dy0 - y_p'(t0)] by Cramer.
-        (y1, y2), (dy1, dy2) = self._y[0], self._dy[0]
-        wronskian = y1 * dy2 - y2 * dy1
-        r0, r1 = y0 - pos_p[..., 0, :], dy0 - vel_p[..., 0, :]
-        c1 = (dy2 * r0 - y2 * r1) / wronskian
-        c2 = (y1 * r1 - dy1 * r0) / wronskian
-        c = torch.stack([c1, c2], dim=-2)  # (..., 2, n_dof)
-        positions = torch.einsum("tj,...jd->...td", self._y, c) + pos_p
-        velocities = torch.einsum("tj,...jd->...td", self._dy, c) + vel_p
-        return positions, velocities
+    def trajectory_numpy(
+        self, params: np.ndarray, y0: np.ndarray, dy0: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`trajectory` for float64 numpy arrays, without torch (no gradient): what a
+        simulator that builds a primitive for every parameter vector calls. The same
+        shapes, and the same numbers up to rounding."""
+        params = np.asarray(params, dtype=np.float64)
+        y0, dy0 = np.asarray(y0, dtype=np.float64), np.asarray(dy0, dtype=np.float64)
+        for name, value, size in (
+            ("params", params, self.n_params), ("y0", y0, self.n_dof), ("dy0", dy0, self.n_dof)
+        ):  # fmt: skip
+            if value.ndim < 1 or value.shape[-1] != size:
+                raise ValueError(f"{name} must have shape (..., {size}), got {value.shape}")
+        w_g = params.reshape(*params.shape[:-1], self.n_dof, self.n_basis + 1)
+        return _solve_initial(*self._np, w_g, y0, dy0)
 
     def distribution(
         self, mean_params: Array, cov_params: Array, y0: Array, dy0: Array

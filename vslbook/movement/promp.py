@@ -28,7 +28,8 @@ from vslbook.movement.basis import (
     _check_positive,
     _check_square,
     normalized_rbf,
-    time_grid,
+    normalized_rbf_np,
+    time_grid_np,
 )
 
 
@@ -61,9 +62,17 @@ class ProMP:
         self.width = None if width is None else _check_positive("width", width)
         self.dtype = dtype
         self.n_params = self.n_dof * self.n_basis
-        self.times = time_grid(self.duration, self.dt, dtype=dtype)
-        self._phi = self._basis_at(self.times)
-        self._dphi = self._basis_at(self.times, derivative=True)
+        t = time_grid_np(self.duration, self.dt)
+        self.times = torch.from_numpy(t).to(dtype)
+        # The basis and its time derivative, computed once in float64 numpy
+        # (see basis.normalized_rbf_np); trajectory_numpy reads them as they are.
+        s = t / self.duration
+        phi = normalized_rbf_np(s, self.n_basis, self.width)
+        dphi = normalized_rbf_np(s, self.n_basis, self.width, derivative=True) / self.duration
+        self._np = (phi, dphi)
+        self._phi, self._dphi = (torch.from_numpy(v).to(dtype) for v in self._np)
+        for arr in self._np:  # shared with the float64 tensors: neither is ever written
+            arr.flags.writeable = False
 
     def _basis_at(self, t: torch.Tensor, derivative: bool = False) -> torch.Tensor:
         """Basis (or its time derivative) at times ``t``, shape ``(*t.shape, n_basis)``."""
@@ -91,6 +100,17 @@ class ProMP:
         Returns a tensor of shape ``(..., T, n_dof)``.
         """
         return torch.einsum("ti,...di->...td", self._dphi, self._weights(w))
+
+    def trajectory_numpy(self, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Positions and velocities (:meth:`trajectory`, :meth:`velocity`) for float64 numpy
+        weights ``(..., n_dof * n_basis)``, without torch: what a simulator that builds a
+        ProMP for every parameter vector (a learned duration) calls."""
+        w = np.asarray(w, dtype=np.float64)
+        if w.ndim < 1 or w.shape[-1] != self.n_params:
+            raise ValueError(f"w must have shape (..., {self.n_params}), got {w.shape}")
+        w = w.reshape(*w.shape[:-1], self.n_dof, self.n_basis).swapaxes(-1, -2)
+        phi, dphi = self._np
+        return phi @ w, dphi @ w
 
     def _observation_matrix(self, phi: torch.Tensor) -> torch.Tensor:
         """Map from weights to the flattened ``(len(phi), n_dof)`` positions, ``(len * n_dof, P)``.

@@ -19,7 +19,6 @@ from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-import torch
 
 from vslbook.movement import ProDMP, ProMP
 
@@ -104,12 +103,6 @@ class ProDMPSpec:
         τ and the delay are clipped to their bounds here (the validity check uses the
         unclipped values, :meth:`bound_excess`).
         """
-        with torch.inference_mode():  # no autograd bookkeeping: the same numbers, sooner
-            return self._trajectory(theta, q0, dq0)
-
-    def _trajectory(
-        self, theta: np.ndarray, q0: np.ndarray, dq0: np.ndarray | None
-    ) -> tuple[np.ndarray, np.ndarray]:
         q0 = np.asarray(q0, dtype=np.float64).reshape(self.n_dof)
         dq0 = (
             np.zeros(self.n_dof)
@@ -142,11 +135,9 @@ class ProDMPSpec:
             goal = q0
         params = np.concatenate([w, goal[:, None]], axis=1).reshape(-1)
         start_vel = dq0 if start == 0 else np.zeros(self.n_dof)
-        pos, vel = dmp.trajectory(
-            torch.from_numpy(params), torch.from_numpy(q0), torch.from_numpy(start_vel)
-        )
-        q[start:] = pos.numpy()[: n + 1 - start]
-        dq[start:] = vel.numpy()[: n + 1 - start]
+        pos, vel = dmp.trajectory_numpy(params, q0, start_vel)
+        q[start:] = pos[: n + 1 - start]
+        dq[start:] = vel[: n + 1 - start]
         return q, dq
 
 
@@ -171,7 +162,7 @@ def _prodmp(
         n_basis, n_dof, duration=duration, dt=dt, alpha=alpha, tau=tau, alpha_x=alpha_phase,
         width=width,
     )  # fmt: skip
-    peak = dmp.basis_matrix()[:, :n_basis].abs().amax(dim=0).numpy()
+    peak = np.abs(dmp.basis_matrix()[:, :n_basis].numpy()).max(axis=0)
     return dmp, np.where(peak > 0, peak, 1.0)
 
 
@@ -185,10 +176,9 @@ def promp_trajectory(
     """
     weights = np.asarray(weights, dtype=np.float64)
     n_dof, n_basis = weights.shape
-    with torch.inference_mode():  # no autograd bookkeeping: the same numbers, sooner
-        mp = ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
-        w = torch.from_numpy(weights.reshape(-1))
-        return q0 + mp.trajectory(w).numpy(), mp.velocity(w).numpy()
+    mp = ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
+    pos, vel = mp.trajectory_numpy(weights.reshape(-1))
+    return q0 + pos, vel
 
 
 def _excess(value: float, bounds: tuple[float, float] | None) -> float:
