@@ -1,5 +1,6 @@
 """Beer Pong (thesis Section 3.4, Appendix A.3.2): layout, determinism, reward cases from
-placed ball states, validity checks before simulation, contexts, and a throw into the cup."""
+placed ball states, validity checks before simulation, contexts, a throw into the cup, and the
+simulation loop (MuJoCo's PD actuators) held to a plain per-step loop of the control law."""
 
 from __future__ import annotations
 
@@ -9,14 +10,23 @@ import mujoco
 import numpy as np
 import pytest
 
+from vslbook.envs.robot.assets import load_model
 from vslbook.envs.robot.beer_pong import (
+    CUP_Z,
+    D_GAINS,
+    DT,
     J_MAX,
     J_MIN,
+    MODEL,
+    MODEL_PATCHES,
+    P_GAINS,
     Q0,
     BeerPong,
     beer_pong_reward,
     desired_trajectory,
+    use_pd_actuators,
 )
+from vslbook.envs.robot.primitives import promp_trajectory
 from vslbook.envs.robot.task import EpisodicEnv
 
 CONTEXT = np.array([0.0, -1.7])
@@ -176,3 +186,202 @@ def test_one_step_env() -> None:
     _, ret, terminated, _, info = env.step(np.r_[0.5, np.zeros(14)])
     assert terminated and info["executed"] and np.isfinite(ret)
     check_env(env, skip_render_check=True)
+
+
+# -- the simulation loop against a plain reference ---------------------------------------------
+# Two θ whose ball bounces off the table (found by sampling θ ~ [U(0.3, 1), N(0, 2²)], rounded,
+# on random contexts until the task reported table contact; the ball leaves the table again).
+TABLE_CASES = [
+    (
+        [0.34, -1.09, 1.45, 0.91, -0.56, -1.33, -0.11, 2.65, 0.7, 1.28, -0.3, -2.58, -1.42, 1.3,
+         0.21],
+        [-0.01, -1.95],
+    ),
+    (
+        [0.99, 2.52, 2.96, 1.62, -0.3, 0.52, 1.24, -3.15, 2.49, -0.64, 0.53, 0.28, 1.82, 2.14,
+         4.43],
+        [0.03, -1.73],
+    ),
+]  # fmt: skip
+
+
+def _plain_episode(m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_steps=500):
+    """The task's episode written as a plain per-step loop of the original law, on a model
+    loaded as the task loads it but with its own motors left as they are (ctrl = 0: unused).
+
+    Each step: mj_step1 → while k ≤ n pin the ball to the hand site (position and linear
+    velocity) → u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias into qfrc_applied (after the
+    release q_d(l) with q̇_d = 0) → mj_step2. Table contact: any ball–table contact in the
+    contact list after release or at the end; in the cup: ball on the cup floor at the end.
+    """
+    theta, context = np.asarray(theta, dtype=float), np.asarray(context, dtype=float)
+    hand = m.site("init_ball_pos").id
+    ball = m.geom("ball_geom").id
+    table = {m.geom("table").id, m.geom("table_contact_geom").id}
+    floor = m.geom("cup_base_table_contact").id
+
+    def touched() -> set[int]:  # geoms the ball touches
+        pairs = [tuple(g) for g in d.contact.geom[: d.ncon]]
+        return {b if a == ball else a for a, b in pairs if ball in (a, b)}
+
+    mujoco.mj_resetData(m, d)
+    m.body_pos[m.body("cup_table").id] = (context[0], context[1], CUP_Z)
+    d.qpos[:7] = Q0
+    mujoco.mj_forward(m, d)
+    d.qpos[7:10] = d.site_xpos[hand]
+    mujoco.mj_forward(m, d)
+    top = d.site_xpos[m.site("cup_goal_table").id].copy()
+    bottom = d.site_xpos[m.site("cup_goal_final_table").id].copy()
+    n = round(theta[0] / DT)
+    w = np.zeros((7, 4))
+    w[:, 2:] = theta[1:].reshape(7, 2) * math.sqrt(0.02)
+    q_d, dq_d = promp_trajectory(w, n * DT, DT, Q0, width=0.1)
+    balls, torques, table_contact = [], [], False
+    for k in range(n + extra_steps):
+        mujoco.mj_step1(m, d)
+        if k <= n:
+            d.qpos[7:10] = d.site_xpos[hand]
+            v = np.zeros(6)
+            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, hand, v, 0)
+            d.qvel[7:10] = v[3:]
+        elif touched() & table:
+            table_contact = True
+        balls.append(d.qpos[7:10].copy())
+        target, target_vel = (q_d[k], dq_d[k]) if k < n else (q_d[n], np.zeros(7))
+        u = P_GAINS * (target - d.qpos[:7]) + D_GAINS * (target_vel - d.qvel[:7])
+        u = u + d.qfrc_bias[:7]
+        d.qfrc_applied[:7] = u
+        torques.append(u)
+        mujoco.mj_step2(m, d)
+    mujoco.mj_forward(m, d)
+    balls.append(d.qpos[7:10].copy())
+    final = touched()
+    in_cup, table_contact = floor in final, table_contact or bool(final & table)
+    balls, torques = np.array(balls), np.array(torques)
+    min_top = min(float(np.linalg.norm(b - top)) for b in balls)
+    end_bottom = float(np.linalg.norm(balls[-1] - bottom))
+    torque_cost = float(np.sum(torques**2)) / len(torques)
+    if in_cup:
+        ret = -(end_bottom**2) - 1.5e-4 * torque_cost
+    else:
+        ret = (-2.0 if table_contact else -4.0) - min_top**2 - 0.5 * end_bottom**2
+        ret -= 1e-4 * torque_cost
+    return {
+        "ret": ret, "in_cup": in_cup, "table_contact": table_contact, "min_dist_top": min_top,
+        "final_dist_bottom": end_bottom, "torque_cost": torque_cost, "balls": balls,
+        "torques": torques,
+    }  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def plain_sim() -> tuple[mujoco.MjModel, mujoco.MjData]:
+    m = load_model(MODEL, MODEL_PATCHES)  # a fresh model: its own motors, untouched
+    return m, mujoco.MjData(m)
+
+
+def test_episodes_match_the_plain_loop(task: BeerPong, plain_sim) -> None:
+    rng = np.random.default_rng(7)
+    random_cases = [
+        (np.r_[rng.uniform(0.3, 1.0), rng.normal(0, 1.5, 14)], task.sample_contexts(1, rng)[0])
+        for _ in range(4)
+    ]
+    cases = [(SUCCESS_THETA, CONTEXT), *TABLE_CASES, *random_cases]
+    theta = np.array([c[0] for c in cases], dtype=float)
+    contexts = np.array([c[1] for c in cases], dtype=float)
+    r = task.evaluate(theta, contexts, workers=0)
+    assert r.executed.all()
+    # both kinds of ending are covered: in the cup, and off the table
+    assert r.success[0] and r.info["table_contact"][1] == r.info["table_contact"][2] == 1.0
+    for i, (th, c) in enumerate(cases):
+        ref = _plain_episode(*plain_sim, th, c)
+        # MuJoCo's actuators sum the same law in another order: the results agree to rounding
+        # (up to ~3e-10 relative seen), not bit for bit
+        assert r.returns[i] == pytest.approx(ref["ret"], rel=1e-7), i
+        assert r.success[i] == ref["in_cup"] and r.info["in_cup"][i] == float(ref["in_cup"]), i
+        assert r.info["table_contact"][i] == float(ref["table_contact"]), i
+        for key in ("min_dist_top", "final_dist_bottom", "torque_cost"):
+            assert r.info[key][i] == pytest.approx(ref[key], rel=1e-7), (i, key)
+    # the last episode's recorded ball and torque paths, step by step
+    np.testing.assert_allclose(task.ball_path, ref["balls"], rtol=0, atol=1e-7)
+    scale = np.abs(ref["torques"]).max()
+    np.testing.assert_allclose(task.torque_path, ref["torques"], rtol=1e-7, atol=1e-9 * scale)
+
+
+def test_trajectory_is_the_promp_of_the_package() -> None:
+    rng = np.random.default_rng(2)
+    for duration in (0.1, 0.37, 0.645, 1.3):
+        theta = np.r_[duration, rng.normal(0, 2, 14)]
+        w = np.zeros((7, 4))
+        w[:, 2:] = theta[1:].reshape(7, 2) * math.sqrt(0.02)
+        n = round(duration / 0.005)
+        expected = promp_trajectory(w, n * 0.005, 0.005, Q0, width=0.1)
+        for got, want in zip(desired_trajectory(theta), expected, strict=True):
+            np.testing.assert_array_equal(got, want)  # the cached ProMP: the same numbers
+
+
+def test_pd_actuators_give_the_feedback_part_of_the_law() -> None:
+    m = load_model(MODEL, MODEL_PATCHES)
+    use_pd_actuators(m)
+    d = mujoco.MjData(m)
+    rng = np.random.default_rng(0)
+    d.qpos[:7] = Q0 + rng.normal(0, 0.3, 7)
+    d.qvel[:7] = rng.normal(0, 2, 7)
+    d.qvel[7:] = rng.normal(0, 2, 3)
+    d.ctrl[:] = rng.normal(0, 500, 7)  # far outside the motors' old range [−1, 1]: not clipped
+    mujoco.mj_forward(m, d)
+    want = d.ctrl - P_GAINS * d.qpos[:7] - D_GAINS * d.qvel[:7]
+    np.testing.assert_allclose(d.actuator_force, want, rtol=1e-13, atol=1e-10)
+    np.testing.assert_allclose(d.qfrc_actuator[:7], d.actuator_force, rtol=1e-13)  # gear 1
+    assert not d.qfrc_actuator[7:].any()  # nothing on the ball
+    # integrators that treat actuator damping implicitly would change the law: refused
+    m2 = load_model(MODEL, MODEL_PATCHES)
+    m2.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
+    with pytest.raises(RuntimeError, match="would change the PD law"):
+        use_pd_actuators(m2)
+
+
+def test_torque_path_is_what_mj_step2_applied(task: BeerPong, monkeypatch) -> None:
+    real_step2, applied = mujoco.mj_step2, []
+
+    def step2(m, d):
+        real_step2(m, d)
+        # after mj_step2 the actuator force and qfrc_applied still are those of the step
+        applied.append(d.actuator_force + d.qfrc_applied[:7])
+
+    monkeypatch.setattr(mujoco, "mj_step2", step2)
+    ep = task.episode(SUCCESS_THETA, CONTEXT)
+    assert ep.executed and len(applied) == len(task.torque_path) == 129 + 500
+    # the loop evaluates the actuator force after the fact as MuJoCo does (bit for bit where
+    # neither uses fused multiply-adds)
+    np.testing.assert_allclose(task.torque_path, np.array(applied), rtol=1e-12, atol=1e-9)
+    assert ep.info["torque_cost"] == pytest.approx(np.sum(np.square(applied)) / 629, rel=1e-12)
+
+
+def test_path_is_the_recorded_ball_path(task: BeerPong) -> None:
+    path = task.path(SUCCESS_THETA, CONTEXT)["ball"]
+    np.testing.assert_array_equal(path, task.ball_path)
+    assert path.shape == (129 + 500 + 1, 3)
+
+
+@pytest.mark.parametrize(
+    ("array", "step"),
+    [("qpos", 40), ("qpos", 300), ("qvel", 300), ("qpos", 600)],  # pinned, flying, last step
+)
+def test_non_finite_state_is_unstable(task: BeerPong, monkeypatch, array, step) -> None:
+    theta = np.r_[0.5, np.zeros(14)]  # n = 100 steps, 600 in all
+    assert task.episode(theta, CONTEXT).ret > -30.0
+    real_step2, calls = mujoco.mj_step2, [0]
+
+    def step2(m, d):
+        real_step2(m, d)
+        calls[0] += 1
+        if calls[0] == step:
+            getattr(d, array)[3] = np.nan  # MuJoCo resets the data at the next mj_step1
+
+    monkeypatch.setattr(mujoco, "mj_step2", step2)
+    before, path_before = task.n_physics_steps, task.ball_path
+    ep = task.episode(theta, CONTEXT)
+    assert ep.ret == -30.0 and ep.executed and not ep.success
+    assert ep.info == {"duration": 0.5, "release_time": 0.5}
+    assert task.n_physics_steps == before + 600 and calls[0] == 600
+    assert task.ball_path is path_before  # left as the last stable episode's

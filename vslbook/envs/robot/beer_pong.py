@@ -29,14 +29,30 @@ by a fixed 3.5 s instead of l).
 control grid, n = round(l / 0.005) steps. At each step the joint torque is
 u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias (gravity and Coriolis compensation) with
 K_p = [200, 300, 100, 100, 10, 10, 2.5], K_d = 0.5·[7, 15, 5, 2.5, 0.3, 0.3, 0.05], not
-clipped, written to ``qfrc_applied`` (the file's motors, ctrl ∈ [−1, 1] with gears, stay at
-ctrl = 0 and are unused, so nothing is clipped or rescaled by a gear). The ball is pinned
-to the hand site ``init_ball_pos`` (position and linear velocity) up to and including the
-state at t = n·0.005 s (the release time = the end of the trajectory); then the robot holds
-q_d(l) with q̇_d = 0 (the authors keep the last desired velocity: an interpretation) for
-``extra_steps`` = 500 more steps while the ball flies. Each step is ``mj_step1`` →
-pin the ball → torque → ``mj_step2``, so the ball takes the hand's *current* position and
-velocity (``mj_step`` followed by pinning, as in the authors' code, lags one step).
+clipped, q and q̇ the state of the step. The ball is pinned to the hand site
+``init_ball_pos`` (position and linear velocity) up to and including the state at
+t = n·0.005 s (the release time = the end of the trajectory); then the robot holds q_d(l)
+with q̇_d = 0 (the authors keep the last desired velocity: an interpretation) for
+``extra_steps`` = 500 more steps while the ball flies. Each step is ``mj_step1`` → pin the
+ball → torque → ``mj_step2``, so the ball takes the hand's *current* position and velocity
+(``mj_step`` followed by pinning, as in the authors' code, lags one step).
+
+How the law is applied: MuJoCo's actuators compute its feedback part. The file's seven arm
+motors (ctrl ∈ [−1, 1] with gears) are turned in memory (:func:`use_pd_actuators`; the file
+is not changed) into actuators on their joints with gear 1, gain 1 on ctrl and the affine
+bias −K_p q − K_d q̇, without ctrl or force limits. ``mj_step2`` computes their force from the
+joint positions and velocities that ``mj_step1`` found for the step, and the Euler
+integrator (the file's) applies it explicitly, like any applied force. With ctrl =
+K_p q_d + K_d q̇_d (computed for all steps beforehand; after the release the constant
+K_p q_d(l), written once) and qfrc_applied = qfrc_bias, actuator force + qfrc_applied is u:
+the same law. Only the order of the sum differs, so results agree with a per-step evaluation
+of the law in Python to rounding (up to about 3e−10 relative seen), not bit for bit. Why:
+per step the loop then only pins the ball, writes ctrl (until the release), copies qfrc_bias
+and records the step; with the law evaluated in numpy everything around the physics cost
+35–45 % of it, now about 15 % (``benchmarks/robot_tasks.py beer-pong``). The torques u of the steps
+(``torque_path``, τ̄) are actuator force + qfrc_applied, the force evaluated after the loop
+from the recorded q, q̇ as MuJoCo evaluates it. So ``model``'s actuators are these PD
+actuators: ctrl = 0 is not "no torque".
 
 **Reward** (A.3.2; the episode return):
 
@@ -51,11 +67,15 @@ the cup). τ̄ ("the squared mean torque") is, as in the code, the mean over all
 steps of Σ_j u_j² with u the applied torque including the compensation term. "Table
 contact" follows the thesis: ball contact with the table's geoms (``table``,
 ``table_contact_geom``) after release; the authors' code also counts cup and wall contacts.
+(The contacts are looked up after the loop, for the recorded states with the ball near the
+table, by recomputing those states' contact lists.)
 "In the cup" (cond. 3 and success) is ball contact with ``cup_base_table_contact`` in the
 final state; the code used any contact during the episode for cond. 3 and the final one for
 success — we use the thesis's single notion. The authors' −500 for "self-collision" (the arm
 hitting the table) is not in the thesis and is left out. An unstable simulation (non-finite
-state or MuJoCo's bad-acceleration warning) returns −30, simulated, unsuccessful (code).
+state or MuJoCo's bad-acceleration warning) returns −30, simulated, unsuccessful (code). A
+non-finite or huge position or velocity in mid-episode shows only as MuJoCo's warning (it
+resets the data and goes on), so its bad-position and bad-velocity warnings count too.
 
 **Validity before simulation** (A.3.2; not simulated, ``executed=False``):
 l < 0.1: −30 − 10 (l − 0.1)²; l > 1.3: −30 − 10 (l − 1.3)²; any q_d outside the joint
@@ -77,6 +97,7 @@ compares with ``==``).
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any, ClassVar
 
@@ -84,8 +105,8 @@ import mujoco
 import numpy as np
 
 from vslbook.envs.robot.assets import load_model
-from vslbook.envs.robot.primitives import promp_trajectory
 from vslbook.envs.robot.task import Episode, EpisodicTask
+from vslbook.movement.promp import ProMP
 
 MODEL = "beerpong/assets/beerpong_wo_cup.xml"
 MODEL_PATCHES = (("../../meshes/wam/", "./meshes/wam/"),)
@@ -108,6 +129,14 @@ INVALID_PENALTY = -30.0
 UNSTABLE_PENALTY = -30.0
 TABLE_GEOMS = ("table", "table_contact_geom")
 CUP_FLOOR_GEOM = "cup_base_table_contact"
+#: MuJoCo's warnings of an unstable simulation: a non-finite or huge position or velocity
+#: (MuJoCo then resets the data, so the bad state itself is gone) or acceleration.
+UNSTABLE_WARNINGS = tuple(
+    int(w) for w in (
+        mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+        mujoco.mjtWarning.mjWARN_BADQACC,
+    )
+)  # fmt: skip
 
 
 def duration_penalty(duration: float) -> float:
@@ -142,17 +171,72 @@ def beer_pong_reward(
     return offset - min_dist_top**2 - 0.5 * final_dist_bottom**2 - 1e-4 * torque_cost
 
 
+@functools.lru_cache(maxsize=256)
+def _promp(n: int) -> ProMP:
+    """The ProMP of an n-step movement; its basis depends on n alone, so it is built once per n
+    (valid durations give n = 20 ... 260)."""
+    return ProMP(N_ZERO + N_LEARNED, N_DOF, duration=n * DT, dt=DT, width=BASIS_WIDTH)
+
+
 def desired_trajectory(
     theta: np.ndarray, weights_scale: float = WEIGHTS_SCALE
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(q_d, q̇_d)``, each ``(n + 1, 7)`` on 0, dt, ..., n·dt with n = round(l / dt).
 
-    ``theta`` must hold a duration inside the bounds (checked by the caller).
+    ``theta`` must hold a duration inside the bounds (checked by the caller). The same numbers
+    as :func:`~vslbook.envs.robot.primitives.promp_trajectory` (q0 + Φᵀw, Eq. 2.46), with the
+    ProMP of each n built once.
     """
     n = int(round(float(theta[0]) / DT))
     w = np.zeros((N_DOF, N_ZERO + N_LEARNED))
     w[:, N_ZERO:] = np.reshape(theta[1:], (N_DOF, N_LEARNED)) * weights_scale
-    return promp_trajectory(w, n * DT, DT, Q0, width=BASIS_WIDTH)
+    pos, vel = _promp(n).trajectory_numpy(w.reshape(-1))
+    return Q0 + pos, vel
+
+
+def use_pd_actuators(model: mujoco.MjModel) -> None:
+    """Make the model's 7 arm motors (in memory) MuJoCo's form of the PD law's feedback part.
+
+    Each becomes a ``general`` actuator on its arm joint with gear 1, gain 1 on ctrl and the
+    affine bias [0, −K_p,j, −K_d,j], no activation and no ctrl or force limits, so its force is
+    ``ctrl_j − K_p,j q_j − K_d,j q̇_j`` (q, q̇ of the step, from ``mj_step1``); with
+    ctrl = K_p q_d + K_d q̇_d that is the PD part of the control law (module docstring). Raises
+    if the model has anything else that would change that force (actuator plugins, delays,
+    activations, actuator damping or armature, joint-level actuator force limits or gravity
+    compensation, disabled actuation) or is not integrated with Euler, which treats actuator
+    forces explicitly (``implicitfast`` would take K_d implicitly).
+    """
+    m = model
+    arm = np.arange(N_DOF)
+    if (
+        m.nu != N_DOF
+        or not np.all(m.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT)
+        or not np.array_equal(m.actuator_trnid[:, 0], arm)
+        or not np.array_equal(m.jnt_dofadr[arm], arm)
+        or not np.all(m.jnt_type[arm] == mujoco.mjtJoint.mjJNT_HINGE)
+    ):
+        raise RuntimeError(f"{MODEL}: expected one motor on each arm joint 0..6 (dofs 0..6)")
+    if (
+        np.any(m.actuator_actnum) or np.any(m.actuator_delay) or np.any(m.actuator_plugin >= 0)
+        or np.any(m.actuator_damping) or np.any(m.actuator_dampingpoly)
+        or np.any(m.actuator_armature) or np.any(m.jnt_actfrclimited[arm])
+        or np.any(m.jnt_actgravcomp[arm])
+        or m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_ACTUATION
+        or m.opt.integrator != mujoco.mjtIntegrator.mjINT_EULER
+    ):  # fmt: skip
+        raise RuntimeError(f"{MODEL}: its actuators or options would change the PD law")
+    m.actuator_dyntype[:] = mujoco.mjtDyn.mjDYN_NONE
+    m.actuator_gaintype[:] = mujoco.mjtGain.mjGAIN_FIXED
+    m.actuator_gainprm[:] = 0.0
+    m.actuator_gainprm[:, 0] = 1.0
+    m.actuator_biastype[:] = mujoco.mjtBias.mjBIAS_AFFINE
+    m.actuator_biasprm[:] = 0.0
+    m.actuator_biasprm[:, 1] = -P_GAINS
+    m.actuator_biasprm[:, 2] = -D_GAINS
+    m.actuator_gear[:] = 0.0
+    m.actuator_gear[:, 0] = 1.0
+    m.actuator_ctrllimited[:] = False
+    m.actuator_forcelimited[:] = False
 
 
 class BeerPong(EpisodicTask):
@@ -192,6 +276,7 @@ class BeerPong(EpisodicTask):
         self.model = load_model(MODEL, MODEL_PATCHES)
         if abs(self.model.opt.timestep - DT) > 1e-12:
             raise RuntimeError(f"{MODEL}: expected timestep {DT}, got {self.model.opt.timestep}")
+        use_pd_actuators(self.model)
         self.data = mujoco.MjData(self.model)
         m = self.model
         self._hand = m.site("init_ball_pos").id
@@ -202,7 +287,8 @@ class BeerPong(EpisodicTask):
         self._table_geoms = np.array([m.geom(g).id for g in TABLE_GEOMS])
         self._floor_geom = m.geom(CUP_FLOOR_GEOM).id
         # Box around the table's geoms, grown by the ball radius + 1 cm: contacts with the
-        # table are looked up only while the ball is inside it (the contact list is costly).
+        # table are looked up only in states with the ball inside it (recomputing a state's
+        # contact list is costly).
         d0 = mujoco.MjData(m)
         mujoco.mj_forward(m, d0)
         ids = self._table_geoms
@@ -210,6 +296,12 @@ class BeerPong(EpisodicTask):
         self._table_lo = np.min(d0.geom_xpos[ids] - m.geom_size[ids], axis=0) - grow
         self._table_hi = np.max(d0.geom_xpos[ids] + m.geom_size[ids], axis=0) + grow
         self._vel = np.zeros(6)
+        self._probe = mujoco.MjData(m)  # recomputes the contacts of recorded states
+        # What the loop records of every step (mj_getState, one call): qpos, qvel and
+        # qfrc_applied, in this order (the order of the mjtState bits).
+        state = mujoco.mjtState
+        self._row_spec = int(state.mjSTATE_QPOS | state.mjSTATE_QVEL | state.mjSTATE_QFRC_APPLIED)
+        self._row_size = mujoco.mj_stateSize(m, self._row_spec)
         self.n_physics_steps = 0  # mj_step1/mj_step2 pairs run by this instance
         self.ball_path = np.empty((0, 3))  # ball positions of the last executed episode
         self.torque_path = np.empty((0, N_DOF))  # its applied torques
@@ -233,7 +325,7 @@ class BeerPong(EpisodicTask):
         mujoco.mj_resetData(m, d)
         m.body_pos[self._cup] = (float(context[0]), float(context[1]), CUP_Z)
         d.qpos[:N_DOF] = Q0
-        mujoco.mj_forward(m, d)
+        mujoco.mj_kinematics(m, d)  # the hand site's position: kinematics suffice
         d.qpos[7:10] = d.site_xpos[self._hand]
         mujoco.mj_forward(m, d)
 
@@ -241,16 +333,17 @@ class BeerPong(EpisodicTask):
         """(p_c,top, p_c,bottom) of the current model state (after a forward pass)."""
         return self.data.site_xpos[self._top].copy(), self.data.site_xpos[self._bottom].copy()
 
-    def ball_contacts(self) -> tuple[bool, bool]:
+    def ball_contacts(self, data: mujoco.MjData | None = None) -> tuple[bool, bool]:
         """(ball touches the cup floor, ball touches the table) in ``data``'s contact list."""
-        d = self.data
+        d = self.data if data is None else data
         if d.ncon == 0:
             return False, False
         g = d.contact.geom[: d.ncon]
         ball = (g == self._ball_geom).any(axis=1)
         other = np.where(g[:, 0] == self._ball_geom, g[:, 1], g[:, 0])[ball]
+        table0, table1 = self._table_geoms
         return bool((other == self._floor_geom).any()), bool(
-            np.isin(other, self._table_geoms).any()
+            ((other == table0) | (other == table1)).any()
         )
 
     # -- episodes -----------------------------------------------------------------------
@@ -268,69 +361,77 @@ class BeerPong(EpisodicTask):
     def _simulate(
         self, q_d: np.ndarray, dq_d: np.ndarray, context: np.ndarray, duration: float
     ) -> Episode:
+        """One executed episode (A.3.2): the control law and ball pin of the module docstring,
+        with the PD part in MuJoCo's actuators (:func:`use_pd_actuators`)."""
         m, d = self.model, self.data
         self.reset(context)
         top, bottom = self.cup_sites()
         n = len(q_d) - 1
         n_total = n + self.extra_steps
-        # Precomputed feed-forward part of the PD law: K_p q_d + K_d q̇_d (hold after the end).
-        ff = np.empty((n_total, N_DOF))
-        ff[:n] = P_GAINS * q_d[:n] + D_GAINS * dq_d[:n]
-        ff[n:] = P_GAINS * q_d[n]
-        balls = np.empty((n_total + 1, 3))
-        torques = np.empty((n_total, N_DOF))
-        tmp = np.empty(N_DOF)
-        table_contact = False
-        # Views into MjData (its buffers never move), so the loop allocates nothing.
-        q, dq, bias = d.qpos[:N_DOF], d.qvel[:N_DOF], d.qfrc_bias[:N_DOF]
-        applied, ball_q, ball_dq = d.qfrc_applied[:N_DOF], d.qpos[7:10], d.qvel[7:10]
+        nq, nv = m.nq, m.nv
+        # ctrl of every step (the PD actuators' force is ctrl − K_p q − K_d q̇, see
+        # use_pd_actuators): K_p q_d + K_d q̇_d before the release step n, then K_p q_d(l) (hold).
+        ctrls = np.empty((n_total, N_DOF))
+        ctrls[:n] = P_GAINS * q_d[:n] + D_GAINS * dq_d[:n]
+        ctrls[n:] = P_GAINS * q_d[n]
+        # Row k: qpos, qvel and qfrc_applied of step k as mj_step2 gets them (one mj_getState).
+        # The ball's positions, the torques and the table contact follow from them after the
+        # loop, which only pins the ball, sets the inputs, records and steps.
+        rows = np.empty((n_total, self._row_size))
+        # Views into MjData (its buffers never move), so the loop allocates nothing; ``[...] =``
+        # is numpy's cheapest copy into a view.
+        ctrl, bias, applied = d.ctrl, d.qfrc_bias[:N_DOF], d.qfrc_applied[:N_DOF]
+        ball_q, ball_dq = d.qpos[7:10], d.qvel[7:10]
         hand_x, hand_v, vel = d.site_xpos[self._hand], self._vel[3:], self._vel
         step1, step2, objvel = mujoco.mj_step1, mujoco.mj_step2, mujoco.mj_objectVelocity
+        record, spec = mujoco.mj_getState, self._row_spec
         site_type, hand = int(mujoco.mjtObj.mjOBJ_SITE), self._hand  # an int: faster than the enum
-        lo, hi = self._table_lo, self._table_hi
-        mul, sub, add = np.multiply, np.subtract, np.add
-        path = self._recorder
-        for k in range(n_total):
+        for row, ctrl_k in zip(rows[: n + 1], ctrls[: n + 1], strict=True):  # to release step n
             step1(m, d)
-            if k <= n:  # ball held at the hand up to the release time n·dt
-                ball_q[:] = hand_x
-                objvel(m, d, site_type, hand, vel, 0)
-                ball_dq[:] = hand_v
-            elif (
-                not table_contact
-                and d.ncon
-                and lo[0] <= ball_q[0] <= hi[0]
-                and lo[1] <= ball_q[1] <= hi[1]
-                and lo[2] <= ball_q[2] <= hi[2]
-            ):
-                table_contact = self.ball_contacts()[1]
-            balls[k] = ball_q
-            if path is not None:
-                path(ball=ball_q)
-            # u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias, with ff = K_p q_d + K_d q̇_d,
-            # computed in place in qfrc_applied (ufuncs with positional outputs)
-            sub(ff[k], mul(P_GAINS, q, tmp), applied)
-            sub(applied, mul(D_GAINS, dq, tmp), applied)
-            add(applied, bias, applied)
-            torques[k] = applied
+            # the ball held at the hand: its position and linear velocity
+            ball_q[...] = hand_x
+            objvel(m, d, site_type, hand, vel, 0)
+            ball_dq[...] = hand_v
+            ctrl[...] = ctrl_k  # at k = n the hold, left in place after the release
+            applied[...] = bias  # gravity and Coriolis compensation, qfrc_bias of this step
+            record(m, d, row, spec)
             step2(m, d)
-        torque_sq = float(np.sum(torques**2))
+        for row in rows[n + 1 :]:  # the ball flies
+            step1(m, d)
+            applied[...] = bias
+            record(m, d, row, spec)
+            step2(m, d)
         self.n_physics_steps += n_total
+        balls = np.empty((n_total + 1, 3))  # the ball's positions at 0, dt, ..., T
+        balls[:n_total] = rows[:, 7:10]
+        path = self._recorder
+        if path is not None:
+            for ball in balls[:n_total]:
+                path(ball=ball)
         release_time = n * DT
-        if not np.all(np.isfinite(d.qpos)) or d.warning[mujoco.mjtWarning.mjWARN_BADQACC].number:
+        warnings = d.warning.number
+        if any(warnings[w] for w in UNSTABLE_WARNINGS) or not np.isfinite(d.qpos).all():
             info = {"duration": duration, "release_time": release_time}
             return Episode(UNSTABLE_PENALTY, False, True, info)
+        # The applied torque u = actuator force + qfrc_applied, the force evaluated as MuJoCo
+        # does (ctrl + (−K_p q − K_d q̇), the affine bias), so u is what mj_step2 applied.
+        torques = np.multiply(rows[:, :N_DOF], -P_GAINS)
+        torques -= np.multiply(rows[:, nq : nq + N_DOF], D_GAINS)
+        torques += ctrls
+        torques += rows[:, nq + nv : nq + nv + N_DOF]
+        table_contact = self._table_contact(rows[n + 1 :, :nq])
         mujoco.mj_forward(m, d)  # contacts of the final state
         balls[n_total] = ball_q
         if path is not None:
             path(ball=ball_q)
-        self.ball_path = balls  # the ball's positions at 0, dt, ..., T (Fig. 3.2g)
+        self.ball_path = balls  # Fig. 3.2g
         self.torque_path = torques  # the applied joint torques u of every step
         in_cup, last_table = self.ball_contacts()
         table_contact = table_contact or last_table
-        min_dist_top = float(np.sqrt(np.min(np.sum((balls - top) ** 2, axis=1))))
-        final_dist_bottom = float(np.linalg.norm(balls[-1] - bottom))
-        torque_cost = torque_sq / n_total
+        x, y, z = (balls - top).T
+        min_dist_top = math.sqrt((x * x + y * y + z * z).min())
+        final_dist_bottom = math.dist(balls[-1], bottom)
+        torque_cost = float((torques * torques).sum()) / n_total
         ret = beer_pong_reward(in_cup, table_contact, min_dist_top, final_dist_bottom, torque_cost)
         info = {
             "in_cup": float(in_cup),
@@ -342,3 +443,22 @@ class BeerPong(EpisodicTask):
             "torque_cost": torque_cost,
         }
         return Episode(float(ret), bool(in_cup), True, info)
+
+    def _table_contact(self, qpos: np.ndarray) -> bool:
+        """Whether the ball touches the table in any of the recorded states ``qpos`` (rows of
+        qpos after release, each the state that step's ``mj_step1`` found its contacts in).
+
+        Only states with the ball inside the box around the table are looked at; their
+        contacts are recomputed on a second MjData by MuJoCo's position stage (a function of
+        qpos alone), which gives the contact list that ``mj_step1`` had.
+        """
+        (x0, y0, z0), (x1, y1, z1) = self._table_lo, self._table_hi
+        x, y, z = qpos[:, 7], qpos[:, 8], qpos[:, 9]
+        inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1) & (z >= z0) & (z <= z1)
+        m, probe = self.model, self._probe
+        for k in np.flatnonzero(inside):
+            probe.qpos[:] = qpos[k]
+            mujoco.mj_fwdPosition(m, probe)
+            if self.ball_contacts(probe)[1]:
+                return True
+        return False
