@@ -100,6 +100,7 @@ TAU_BOUNDS, DELAY_BOUNDS = (0.56, 1.5), (0.05, 0.6)
 BALL_Z0, BALL_VZ, BALL_VX_4D = 1.75, 0.5, 2.5
 GRAVITY, TABLE_HEIGHT, NET_HEIGHT, TABLE_X_END, TABLE_Y_HALF = 9.81, 0.77, 0.1, 1.1, 0.6
 UNSTABLE_RETURN = -25.0
+_SUBSTEPS = tuple(range(FRAME_SKIP * k, FRAME_SKIP * (k + 1)) for k in range(MAX_STEPS))
 SUCCESS_RADIUS = 0.2
 
 SPEC = ProDMPSpec(
@@ -144,11 +145,13 @@ def staged_reward(
             f"ball and racket must be equal (T>0, 3) arrays: {ball.shape}, {racket.shape}"
         )
     goal = np.asarray(goal, dtype=np.float64)[:2]
-    near = 1.0 - math.tanh(float(np.min(np.sum((ball - racket) ** 2, axis=1))))
+    diff = ball - racket
+    near = 1.0 - math.tanh(float(np.min(np.einsum("ij,ij->i", diff, diff))))
     if not hit:
         return 0.2 * near
     if landing is None:
-        closest = float(np.min(np.sum((ball[:, :2] - goal) ** 2, axis=1)))
+        off = ball[:, :2] - goal
+        closest = float(np.min(np.einsum("ij,ij->i", off, off)))
         return 2.0 * near + (1.0 - math.tanh(closest))
     land = np.asarray(landing, dtype=np.float64)[:2]
     err = float(np.sum((land - goal) ** 2))
@@ -313,18 +316,17 @@ class TableTennis4D(EpisodicTask):
         landed_on_table = False
         i = k = 0
         record, path = self._record, self._recorder
-        step, sub, mul, sub_steps = mujoco.mj_step, np.subtract, np.multiply, range(FRAME_SKIP)
+        step, sub, mul = mujoco.mj_step, np.subtract, np.multiply
         if path is not None:
             path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
         for k in range(MAX_STEPS):
             sub(feedforward[k], mul(KP, q, tmp), ctrl)  # in place: (K_p q_d + K_d q̇_d - K_p q)
             sub(ctrl, mul(KD, dq, tmp), ctrl)  # - K_d q̇
-            for _ in sub_steps:
+            for i in _SUBSTEPS[k]:  # rows 4k .. 4k + 3 of xs
                 if record is not None:  # the state whose positions mj_step leaves in xpos
                     record.append(qpos.copy())
                 step(m, d)
                 xs[i] = xpos
-                i += 1
                 if d.ncon:
                     pairs = d.contact.geom[: d.ncon]
                     rows = pairs[(pairs == ball_geom).any(axis=1)]
@@ -346,9 +348,11 @@ class TableTennis4D(EpisodicTask):
                 path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
             if done or unstable:
                 break
+        i += 1  # sub-steps taken: the last row written is i
         self.sim_steps += i
         ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
-        d2 = np.sum((ball - racket) ** 2, axis=1)
+        diff = ball - racket
+        d2 = np.einsum("ij,ij->i", diff, diff)
         if record is not None:  # keep the physics step where ball and racket were closest
             record[:] = [record[int(np.argmin(d2))]]
         counted = landing if landed_on_table or self.floor_counts_as_landing else None
