@@ -44,6 +44,16 @@ def test_cli_run_and_resume(tmp_path, capsys):
     assert main(argv) == 0  # second call finds the DONE run
 
 
+def test_cli_set_is_repeatable(tmp_path, capsys):
+    """Every --set counts (argparse would otherwise keep only the last one)."""
+    base = ["run", "erl-pg", "--env", ENV, "--budget", "smoke", "--root", str(tmp_path),
+            "--no-progress"]  # fmt: skip
+    assert main([*base, "--set", "learning_rate=0.1", "--set", "init_std=0.5"]) == 0
+    (config,) = tmp_path.glob("*/config.json")
+    got = json.loads(config.read_text())
+    assert got["learning_rate"] == 0.1 and got["init_std"] == 0.5
+
+
 def test_cli_bad_input_exits_2_with_message(tmp_path, capsys):
     assert main(["run", "nope", "--env", ENV, "--root", str(tmp_path)]) == 2
     assert "unknown algorithm 'nope'" in capsys.readouterr().err

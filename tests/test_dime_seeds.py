@@ -89,6 +89,21 @@ def test_target_network_ablation_trains_its_seeds_one_after_the_other(tmp_path):
     assert _no_clocks(_rows(together[1])) == _no_clocks(_rows(alone))  # the same loop
 
 
+def test_compiled_updates_train_their_seeds_one_after_the_other(tmp_path, monkeypatch):
+    """compile=True is honoured with several seeds: each seed goes through the single-seed
+    loop, which compiles its updates (torch.compile itself is replaced here: CI has no time
+    for inductor)."""
+    import torch
+
+    compiled = []
+    monkeypatch.setattr(torch, "compile", lambda fn, **kw: compiled.append(fn.__name__) or fn)
+    over = dict(TINY, total_steps=100_000, compile=True)
+    together = run_seeds("dime", ENV, [0, 1], "smoke", root=tmp_path / "a", overrides=over,
+                         progress=False)  # fmt: skip
+    assert all(rd.done for rd in together)
+    assert compiled == ["critic_update", "actor_update"] * 2
+
+
 def test_seeds_at_different_steps_train_in_groups(tmp_path):
     """A seed checkpointed earlier alone and a fresh one: each ends as it would alone."""
     run("dime", ENV, 1, "smoke", root=tmp_path / "b", overrides=TINY, progress=False,

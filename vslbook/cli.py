@@ -98,7 +98,10 @@ def _parser() -> argparse.ArgumentParser:
         help="smoke | reduced | full (default: $VSLBOOK_BUDGET or reduced)",
     )
     r.add_argument("--root", default="runs", help="folder for run directories")
-    r.add_argument("--set", nargs="*", metavar="KEY=VALUE", help="override config fields")
+    r.add_argument(
+        "--set", nargs="*", action="extend", metavar="KEY=VALUE",
+        help="override config fields (repeatable: the pairs of every --set count)",
+    )
     r.add_argument("--no-progress", action="store_true")
     r.add_argument(
         "--reuse-stale",
@@ -114,7 +117,10 @@ def _parser() -> argparse.ArgumentParser:
     s.add_argument("--seeds", type=_seed, nargs="*", default=None)
     s.add_argument("--budget", default=None)
     s.add_argument("--root", default="runs")
-    s.add_argument("--grid", nargs="*", metavar="KEY=V1,V2", help="grid over config fields")
+    s.add_argument(
+        "--grid", nargs="*", action="extend", metavar="KEY=V1,V2",
+        help="grid over config fields (repeatable)",
+    )
     s.add_argument("--executor", default="local", choices=["debug", "local", "slurm"])
     s.add_argument("--slurm", default=None, help="YAML file of submitit SLURM parameters")
 

@@ -133,7 +133,10 @@ def train_seeds(
     for r in records[1:]:
         if config_from_record(config_cls, r) != cfg or r["env"] != records[0]["env"]:
             raise ValueError("the seeds trained together must share env and configuration")
-    if cfg.use_target_network:  # the target-network ablation: one seed after the other
+    # One seed after the other through the single-seed loop: the target-network ablation
+    # (no seed axis for the target copy), and compiled updates (``compile`` wraps the
+    # single-seed update functions; the vmap-ed stacked ones are not compiled).
+    if cfg.use_target_network or cfg.compile:
         out: list[Any] = []
         for run, rec in zip(runs, records, strict=True):
             try:
