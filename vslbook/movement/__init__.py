@@ -2,7 +2,8 @@
 
 All three map a low-dimensional parameter vector to a trajectory of shape ``(..., T, n_dof)``,
 batched over the leading dimensions of the parameters; inputs may be numpy arrays or tensors,
-outputs are torch tensors (float64 by default).
+outputs are torch tensors (float64 by default). ProMP and ProDMP also evaluate numpy arrays
+without torch (``trajectory_numpy``), which is what the robot tasks use.
 """
 
 from vslbook.movement.dmp import DMP

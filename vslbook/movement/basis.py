@@ -113,12 +113,6 @@ def canonical_phase(t: Array, alpha_x: float = 3.0, tau: float = 1.0) -> torch.T
 
 
 # --------------------------------------------------------------------------- radial basis
-def rbf_centers(n_basis: int, dtype: torch.dtype = torch.float64) -> torch.Tensor:
-    """Centres of ``n_basis`` bumps spaced evenly over the phase interval ``[0, 1]``."""
-    n_basis = _check_int("n_basis", n_basis)
-    return torch.linspace(0.0, 1.0, n_basis, dtype=dtype)
-
-
 def default_width(n_basis: int) -> float:
     """Default bump width: the distance between neighbouring centres (1 for a single bump)."""
     n_basis = _check_int("n_basis", n_basis)
