@@ -280,3 +280,56 @@ def test_found_theta_under_small_perturbations(task):
     small = THETA_RETURN + 1e-3 * rng.standard_normal((3, 23))
     r = task.evaluate(small, CONTEXT_RETURN, workers=0)
     assert r.executed.all() and np.all(np.isfinite(r.returns)) and np.all(r.info["hit"] == 1)
+
+
+# -- the compiled sub-step loop against the Python loop -----------------------------------------
+def _both(cls, **kwargs):
+    return cls(compiled=True, **kwargs), cls(compiled=False, **kwargs)
+
+
+def _assert_same(fast, plain, theta, contexts):
+    """The compiled and the Python loop give the same numbers, bit for bit, and take the same
+    physics steps (the same C step on the same state, in the same order)."""
+    before = fast.sim_steps, plain.sim_steps
+    a = fast.evaluate(theta, contexts, workers=0)
+    b = plain.evaluate(theta, contexts, workers=0)
+    assert fast.sim_steps - before[0] == plain.sim_steps - before[1] > 0
+    np.testing.assert_array_equal(a.returns, b.returns)
+    np.testing.assert_array_equal(a.success, b.success)
+    for key in a.info:
+        np.testing.assert_array_equal(a.info[key], b.info[key], err_msg=key)
+    return a
+
+
+def test_compiled_loop_equals_the_python_loop():
+    fast, plain = _both(TableTennis4D)
+    # a hit landing on the robot's side, a return to the goal (success), a miss
+    r = _assert_same(fast, plain, np.stack([THETA_HIT, THETA_RETURN, THETA_HIT]),
+                     np.stack([CONTEXT, CONTEXT_RETURN, [-0.9, 0.5, -0.5, 0.3]]))  # fmt: skip
+    assert r.info["hit"][:2].tolist() == [1.0, 1.0] and r.success[1]
+    rng = np.random.default_rng(5)
+    _assert_same(fast, plain, random_valid_thetas(fast, 8, rng), fast.sample_contexts(8, rng))
+    # the authors' rule: a floor contact after the hit is a landing too
+    floor_fast, floor_plain = _both(TableTennis4D, floor_counts_as_landing=True)
+    _assert_same(floor_fast, floor_plain, THETA_HIT, [-0.5, 0.0, -0.6, 0.0])
+    hard_fast, hard_plain = _both(TableTennisHard)
+    _assert_same(hard_fast, hard_plain, random_valid_thetas(hard_fast, 4, rng),
+                 hard_fast.sample_contexts(4, rng))  # fmt: skip
+
+
+def test_compiled_loop_stops_an_unstable_simulation_like_the_python_loop():
+    """With motor gears 10⁴ times too large MuJoCo diverges (bad accelerations) within a few
+    control steps: both loops end the episode at the same step with the unstable return."""
+    fast, plain = _both(TableTennis4D)
+    for t in (fast, plain):
+        t.model.actuator_gear[:, 0] = 1e4
+    rng = np.random.default_rng(3)
+    th = random_valid_thetas(fast, 4, rng)
+    r = _assert_same(fast, plain, th, fast.sample_contexts(4, rng))
+    bad = r.info["unstable"] == 1.0
+    assert bad.sum() >= 3 and np.all(r.returns[bad] == -25.0) and np.all(r.info["steps"][bad] < 10)
+
+
+def test_compiled_flag_is_checked():
+    with pytest.raises(TypeError, match="compiled must be a bool, got 'yes'"):
+        TableTennis4D(compiled="yes")

@@ -61,6 +61,13 @@ to bat centre over all sub-steps), g = goal:
 Success: the returned ball lands on the table at x < 0 (opponent's side) and
 ‖landing_xy - goal‖ < 0.2.
 
+Speed: the loop over control steps and sub-steps runs compiled (:func:`_compiled_loop`,
+numba calling MuJoCo's C ``mj_step``, see :mod:`vslbook.envs.robot.native`), with the
+contacts read from four contact sensors the model gets in memory (ball with bat, back of
+the bat, floor, table); ``compiled=False`` runs the same loop in Python, as do recorded
+episodes (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`, :meth:`TableTennis4D.strike`).
+Both give the same numbers bit for bit (tested).
+
 Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball`` (ball centre) and
 ``racket`` (bat centre) at the start and after every control step, as the reward reads them
 (``xpos`` after a physics step); the last row is the sub-step that ended the episode, so
@@ -82,9 +89,11 @@ import math
 from typing import Any, ClassVar
 
 import mujoco
+import numba
 import numpy as np
 
 from vslbook.envs.robot.assets import load_model
+from vslbook.envs.robot.native import MJ_STEP
 from vslbook.envs.robot.primitives import ProDMPSpec, joint_limit_excess
 from vslbook.envs.robot.task import Episode, EpisodicTask
 
@@ -101,6 +110,17 @@ BALL_Z0, BALL_VZ, BALL_VX_4D = 1.75, 0.5, 2.5
 GRAVITY, TABLE_HEIGHT, NET_HEIGHT, TABLE_X_END, TABLE_Y_HALF = 9.81, 0.77, 0.1, 1.1, 0.6
 UNSTABLE_RETURN = -25.0
 _SUBSTEPS = tuple(range(FRAME_SKIP * k, FRAME_SKIP * (k + 1)) for k in range(MAX_STEPS))
+#: Contact sensors added to the model in memory, one per geom the ball's contacts are sorted
+#: by (bat, back of the bat, floor, table): each reads how many contacts of the ball with
+#: that geom the step's contact list holds (``data="found"``). The compiled loop reads these
+#: instead of the contact list. Sensors do not change the dynamics.
+CONTACT_GEOMS = ("bat", "bat_back", "floor", "table_tennis_table")
+_SENSORS = "".join(
+    f'<contact name="vslbook_ball_{g}" geom1="target_ball_contact" geom2="{g}" num="1" '
+    'data="found"/>'
+    for g in CONTACT_GEOMS
+)
+MODEL_PATCHES = (("</mujoco>", f"<sensor>{_SENSORS}</sensor></mujoco>"),)
 SUCCESS_RADIUS = 0.2
 
 SPEC = ProDMPSpec(
@@ -168,6 +188,44 @@ def trajectory_penalty(theta: np.ndarray, q_d: np.ndarray) -> float:
     return -(3.0 * d_tau + 3.0 * d_delay + high + low)
 
 
+@numba.njit(cache=False)
+def _compiled_loop(
+    m_ptr, d_ptr, feedforward, q, dq, ctrl, xpos, xs, found, warnings, bad, ball_xpos, landing
+):  # pragma: no cover (numba compiles it; the tests compare it with the Python loop)
+    """:meth:`TableTennis4D._python_loop` without the recorders, compiled: the same control
+    law, the same ``mj_step`` (MuJoCo's C function on the task's model and data) and the
+    same events, read from the contact sensors ``found`` (ball with bat, back of the bat,
+    floor, table) instead of the contact list. Writes the body positions of sub-step i to
+    ``xs[i]`` and the landing point to ``landing``; returns ``(sub-steps taken, last control
+    step, (hit, landed, landed on the table, unstable))``."""
+    hit = done = unstable = landed = on_table = False
+    i = -1
+    k = 0
+    for k in range(feedforward.shape[0]):
+        for j in range(7):  # (K_p q_d + K_d q̇_d - K_p q) - K_d q̇, as the Python loop
+            ctrl[j] = feedforward[k, j] - KP[j] * q[j]
+            ctrl[j] = ctrl[j] - KD[j] * dq[j]
+        for _ in range(FRAME_SKIP):
+            i += 1
+            MJ_STEP(m_ptr, d_ptr)
+            xs[i] = xpos
+            on_bat, on_floor, on_table_now = found[0] + found[1] > 0, found[2] > 0, found[3] > 0
+            if not hit:
+                hit = on_bat
+                if not hit and on_floor:
+                    done = True
+            if hit and not landed and (on_floor or on_table_now):
+                landing[:] = ball_xpos
+                landed, on_table, done = True, not on_floor, True
+            if done:
+                break
+        if warnings[bad] > 0:  # MuJoCo reset the state after a divergence
+            unstable = True
+        if done or unstable:
+            break
+    return i + 1, k, (hit, landed, on_table, unstable)
+
+
 class TableTennis4D(EpisodicTask):
     """Table tennis with a 4D context (ball start x/y, goal x/y); see the module docstring."""
 
@@ -184,12 +242,20 @@ class TableTennis4D(EpisodicTask):
     path_names: ClassVar[tuple[str, ...]] = ("ball", "racket")
     spec: ClassVar[ProDMPSpec] = SPEC
 
-    def __init__(self, floor_counts_as_landing: bool = False, **kwargs: Any) -> None:
-        super().__init__(floor_counts_as_landing=floor_counts_as_landing, **kwargs)
+    def __init__(
+        self, floor_counts_as_landing: bool = False, compiled: bool = True, **kwargs: Any
+    ) -> None:
+        super().__init__(
+            floor_counts_as_landing=floor_counts_as_landing, compiled=compiled, **kwargs
+        )
         if not isinstance(floor_counts_as_landing, bool):
             raise TypeError("floor_counts_as_landing must be a bool")
+        if not isinstance(compiled, bool):
+            raise TypeError(f"compiled must be a bool, got {compiled!r}")
         self.floor_counts_as_landing = floor_counts_as_landing
-        self.model = load_model(MODEL)
+        #: run the sub-step loop compiled (numba) when nothing is recorded; False: in Python
+        self.compiled = compiled
+        self.model = load_model(MODEL, MODEL_PATCHES)
         if not math.isclose(self.model.opt.timestep, TIMESTEP):
             raise RuntimeError(f"unexpected model timestep {self.model.opt.timestep}")
         self.data = mujoco.MjData(self.model)
@@ -215,6 +281,10 @@ class TableTennis4D(EpisodicTask):
             and not m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_CLAMPCTRL
         ):
             raise RuntimeError("the model's motors must clamp ctrl to [-1, 1]")
+        adr = [int(m.sensor_adr[m.sensor(f"vslbook_ball_{g}").id]) for g in CONTACT_GEOMS]
+        if adr != list(range(adr[0], adr[0] + len(adr))) or m.nu != 7:
+            raise RuntimeError(f"{MODEL}: expected 7 motors and the 4 contact sensors in a row")
+        self._found = slice(adr[0], adr[0] + len(adr))  # sensordata[self._found]: a view
         self.sim_steps = 0  # physics sub-steps taken by this instance (tests and benchmarks)
         self._xs = np.empty((MAX_STEPS * FRAME_SKIP, m.nbody, 3))  # see simulate()
         self._record: list[np.ndarray] | None = None  # qpos per physics step, see strike()
@@ -296,19 +366,72 @@ class TableTennis4D(EpisodicTask):
     def simulate(
         self, q_d: np.ndarray, dq_d: np.ndarray, ball0: np.ndarray, goal: np.ndarray
     ) -> Episode:
-        """Track ``(q_d, q̇_d)`` ``(≥350, 7)`` with the ball served from ``ball0`` = (x, y, v_x)."""
-        m, d = self.model, self.data
-        self._start(ball0, goal)
+        """Track ``(q_d, q̇_d)`` ``(≥350, 7)`` with the ball served from ``ball0`` = (x, y, v_x).
 
-        # Every body's position after every sub-step (rows [:i] are this episode's); the
-        # buffer is kept between episodes, so the loop allocates nothing.
+        The sub-step loop runs compiled (:func:`_compiled_loop`); while a path or the strike
+        frame is recorded (Python callbacks in the loop) it runs as Python
+        (:meth:`_python_loop`), the plain reading the tests hold the compiled loop to.
+        """
+        self._start(ball0, goal)
+        # u = K_p q_d + K_d q̇_d - K_p q - K_d q̇; the clip to [-1, 1] is MuJoCo's own ctrl
+        # clamping (ctrlrange of the motors, checked in __init__).
+        feedforward = KP * q_d[:MAX_STEPS] + KD * dq_d[:MAX_STEPS]
+        if self._record is None and self._recorder is None and self.compiled:
+            i, k, hit, landing, landed_on_table, unstable = self._run_compiled(feedforward)
+        else:
+            i, k, hit, landing, landed_on_table, unstable = self._python_loop(feedforward)
+        xs = self._xs
+        record = self._record
+        self.sim_steps += i
+        ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
+        diff = ball - racket
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        if record is not None:  # keep the physics step where ball and racket were closest
+            record[:] = [record[int(np.argmin(d2))]]
+        counted = landing if landed_on_table or self.floor_counts_as_landing else None
+        dist = float(np.linalg.norm(landing[:2] - goal)) if landing is not None else math.nan
+        ret = UNSTABLE_RETURN if unstable else staged_reward(ball, racket, goal, hit, counted)
+        success = bool(
+            not unstable and landed_on_table and landing[0] < 0.0 and dist < SUCCESS_RADIUS
+        )
+        info = {
+            "hit": float(hit),
+            "landed": float(landed_on_table),
+            "landing_x": float(landing[0]) if landing is not None else math.nan,
+            "landing_y": float(landing[1]) if landing is not None else math.nan,
+            "landing_dist": dist,
+            "min_ball_racket_dist": float(np.sqrt(np.min(d2))),
+            "unstable": float(unstable),
+            "steps": float(k + 1),
+        }
+        return Episode(float(ret), success, True, info)
+
+    def _run_compiled(
+        self, feedforward: np.ndarray
+    ) -> tuple[int, int, bool, np.ndarray | None, bool, bool]:
+        """:func:`_compiled_loop` on this task's model and data (see :meth:`_python_loop`)."""
+        m, d = self.model, self.data
+        landing = np.empty(3)
+        n, k, flags = _compiled_loop(
+            m._address, d._address, feedforward, d.qpos[:7], d.qvel[:7], d.ctrl, d.xpos,
+            self._xs, d.sensordata[self._found], d.warning.number,
+            int(mujoco.mjtWarning.mjWARN_BADQACC), d.geom_xpos[self._ball_geom], landing,
+        )  # fmt: skip
+        hit, landed, on_table, unstable = (bool(f) for f in flags)
+        return n, k, hit, landing if landed else None, on_table, unstable
+
+    def _python_loop(
+        self, feedforward: np.ndarray
+    ) -> tuple[int, int, bool, np.ndarray | None, bool, bool]:
+        """The episode's control and sub-step loop in Python, with the path and strike-frame
+        recorders: after every sub-step the body positions go to row i of ``self._xs`` and
+        the contacts are read from MuJoCo's contact list. Returns ``(sub-steps taken, last
+        control step, hit, landing point or None, landed on the table, unstable)``."""
+        m, d = self.model, self.data
         xs = self._xs
         xpos, qpos, qvel, ctrl = d.xpos, d.qpos, d.qvel, d.ctrl
         q, dq, tmp = qpos[:7], qvel[:7], np.empty(7)
         warnings, bad = d.warning.number, int(mujoco.mjtWarning.mjWARN_BADQACC)
-        # u = K_p q_d + K_d q̇_d - K_p q - K_d q̇; the clip to [-1, 1] is MuJoCo's own ctrl
-        # clamping (ctrlrange of the motors, checked in __init__).
-        feedforward = KP * q_d[:MAX_STEPS] + KD * dq_d[:MAX_STEPS]
         ball_geom, bats = self._ball_geom, self._bat_geoms
         floor, table = self._floor, self._table
         hit = unstable = done = False
@@ -348,31 +471,7 @@ class TableTennis4D(EpisodicTask):
                 path(ball=xpos[self._ball_body], racket=xpos[self._bat_body])
             if done or unstable:
                 break
-        i += 1  # sub-steps taken: the last row written is i
-        self.sim_steps += i
-        ball, racket = xs[:i, self._ball_body], xs[:i, self._bat_body]
-        diff = ball - racket
-        d2 = np.einsum("ij,ij->i", diff, diff)
-        if record is not None:  # keep the physics step where ball and racket were closest
-            record[:] = [record[int(np.argmin(d2))]]
-        counted = landing if landed_on_table or self.floor_counts_as_landing else None
-        dist = float(np.linalg.norm(landing[:2] - goal)) if landing is not None else math.nan
-        ret = UNSTABLE_RETURN if unstable else staged_reward(ball, racket, goal, hit, counted)
-        success = bool(
-            not unstable and landed_on_table and landing[0] < 0.0 and dist < SUCCESS_RADIUS
-        )
-        info = {
-            "hit": float(hit),
-            "landed": float(landed_on_table),
-            "landing_x": float(landing[0]) if landing is not None else math.nan,
-            "landing_y": float(landing[1]) if landing is not None else math.nan,
-            "landing_dist": dist,
-            "min_ball_racket_dist": float(np.sqrt(np.min(d2))),
-            "unstable": float(unstable),
-            "steps": float(k + 1),
-        }
-        return Episode(float(ret), success, True, info)
-
+        return i + 1, k, hit, landing, landed_on_table, unstable
 
 class TableTennisHard(TableTennis4D):
     """Table Tennis Hard (B.4.1.2): the context adds the serve speed v_x ∈ [1.5, 4] m/s."""
