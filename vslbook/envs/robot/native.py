@@ -12,6 +12,11 @@ C function on the same memory, so the same numbers, without the Python around ea
 ``MJ_STEP(model._address, data._address)``); it is bound when this module is imported.
 The numpy views of ``MjData`` (``data.xpos``, ``data.ctrl``, ``data.sensordata``, ...)
 point into the same memory, so a compiled loop reads and writes them as arrays.
+
+What a compiled loop gives up: MuJoCo's fatal errors (``mju_error``, e.g. an ``mjData``
+arena too small for the contacts) reach Python as exceptions only through the ``mujoco``
+bindings' own calls, so a task offers its Python loop as well (table tennis:
+``compiled=False``), which is also the reference the tests hold the compiled loop to.
 """
 
 from __future__ import annotations
