@@ -27,6 +27,7 @@ seed axis where the algorithm can).
     python benchmarks/dime_throughput.py --device cpu --steps 30 --seconds 60
     python benchmarks/dime_throughput.py --configs 4x256 --seeds 3
     python benchmarks/dime_throughput.py --run-set reduced
+    python benchmarks/dime_throughput.py --run-set reduced --sets ablations pointmass
 """
 
 from __future__ import annotations
@@ -189,8 +190,9 @@ def measure_seeds(
             "ms_per_update": 1e3 * wall / n}  # fmt: skip
 
 
-def time_run_sets(budget_name: str, root: str | None) -> None:
-    """Train the Chapter 5 run sets at ``budget_name`` in ``root`` and print their wall times."""
+def time_run_sets(budget_name: str, root: str | None, only: list[str] | None = None) -> None:
+    """Train the Chapter 5 run sets at ``budget_name`` in ``root`` and print their wall times
+    (``only``: these sets, by name)."""
     from vslbook.budget import get_budget
     from vslbook.experiments.dime_runs import chapter5_run_sets
 
@@ -200,8 +202,14 @@ def time_run_sets(budget_name: str, root: str | None) -> None:
         print(f"note: {base / 'runs'} already holds runs; finished ones are reused, not timed")
     print(f"Chapter 5 run sets at budget {budget.name!r} ({budget.seeds} seeds) in {base}")
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    sets = chapter5_run_sets(budget)
+    unknown = sorted(set(only or ()) - set(sets))
+    if unknown:
+        raise SystemExit(f"unknown run set(s) {unknown}; the sets are {list(sets)}")
     total = 0.0
-    for name, run_set in chapter5_run_sets(budget).items():
+    for name, run_set in sets.items():
+        if only and name not in only:
+            continue
         start = time.perf_counter()
         out = run_set.run(budget, base / "runs", base / "tables" / name, progress=False)
         wall = time.perf_counter() - start
@@ -237,11 +245,15 @@ def main() -> None:
         help="time the Chapter 5 run sets at this budget instead (smoke | reduced | full)",
     )  # fmt: skip
     parser.add_argument("--root", default=None, help="folder for --run-set (default: a temp dir)")
+    parser.add_argument(
+        "--sets", nargs="+", default=None, metavar="NAME",
+        help="with --run-set: only these sets (cheetah, ablations, pointmass)",
+    )  # fmt: skip
     args = parser.parse_args()
     if args.run_set is not None:
         if args.threads:
             torch.set_num_threads(args.threads)
-        time_run_sets(args.run_set, args.root)
+        time_run_sets(args.run_set, args.root, args.sets)
         return
     if args.steps < 1 or args.seconds <= 0:
         parser.error(f"need --steps >= 1 and --seconds > 0, got {args.steps}, {args.seconds}")
