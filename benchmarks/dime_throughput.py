@@ -197,15 +197,15 @@ def time_run_sets(budget_name: str, root: str | None, only: list[str] | None = N
     from vslbook.experiments.dime_runs import chapter5_run_sets
 
     budget = get_budget(budget_name)
+    sets = chapter5_run_sets(budget)
+    unknown = sorted(set(only or ()) - set(sets))
+    if unknown:
+        raise SystemExit(f"unknown run set(s) {unknown}; the sets are {list(sets)}")
     base = Path(root) if root else Path(tempfile.mkdtemp(prefix="ch5-run-set-"))
     if (base / "runs").exists() and any((base / "runs").iterdir()):
         print(f"note: {base / 'runs'} already holds runs; finished ones are reused, not timed")
     print(f"Chapter 5 run sets at budget {budget.name!r} ({budget.seeds} seeds) in {base}")
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
-    sets = chapter5_run_sets(budget)
-    unknown = sorted(set(only or ()) - set(sets))
-    if unknown:
-        raise SystemExit(f"unknown run set(s) {unknown}; the sets are {list(sets)}")
     total = 0.0
     for name, run_set in sets.items():
         if only and name not in only:
