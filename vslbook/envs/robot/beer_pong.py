@@ -97,7 +97,6 @@ compares with ``==``).
 
 from __future__ import annotations
 
-import functools
 import math
 from typing import Any, ClassVar
 
@@ -105,8 +104,8 @@ import mujoco
 import numpy as np
 
 from vslbook.envs.robot.assets import load_model
+from vslbook.envs.robot.primitives import promp_trajectory
 from vslbook.envs.robot.task import Episode, EpisodicTask
-from vslbook.movement.promp import ProMP
 
 MODEL = "beerpong/assets/beerpong_wo_cup.xml"
 MODEL_PATCHES = (("../../meshes/wam/", "./meshes/wam/"),)
@@ -171,27 +170,18 @@ def beer_pong_reward(
     return offset - min_dist_top**2 - 0.5 * final_dist_bottom**2 - 1e-4 * torque_cost
 
 
-@functools.lru_cache(maxsize=256)
-def _promp(n: int) -> ProMP:
-    """The ProMP of an n-step movement; its basis depends on n alone, so it is built once per n
-    (valid durations give n = 20 ... 260)."""
-    return ProMP(N_ZERO + N_LEARNED, N_DOF, duration=n * DT, dt=DT, width=BASIS_WIDTH)
-
-
 def desired_trajectory(
     theta: np.ndarray, weights_scale: float = WEIGHTS_SCALE
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(q_d, q̇_d)``, each ``(n + 1, 7)`` on 0, dt, ..., n·dt with n = round(l / dt).
 
-    ``theta`` must hold a duration inside the bounds (checked by the caller). The same numbers
-    as :func:`~vslbook.envs.robot.primitives.promp_trajectory` (q0 + Φᵀw, Eq. 2.46), with the
-    ProMP of each n built once.
+    ``theta`` must hold a duration inside the bounds (checked by the caller). Valid durations
+    give n = 20 ... 260, so the ProMP of each n is built once (``promp_trajectory``'s cache).
     """
     n = int(round(float(theta[0]) / DT))
     w = np.zeros((N_DOF, N_ZERO + N_LEARNED))
     w[:, N_ZERO:] = np.reshape(theta[1:], (N_DOF, N_LEARNED)) * weights_scale
-    pos, vel = _promp(n).trajectory_numpy(w.reshape(-1))
-    return Q0 + pos, vel
+    return promp_trajectory(w, n * DT, DT, Q0, width=BASIS_WIDTH)
 
 
 def use_pd_actuators(model: mujoco.MjModel) -> None:

@@ -176,9 +176,16 @@ def promp_trajectory(
     """
     weights = np.asarray(weights, dtype=np.float64)
     n_dof, n_basis = weights.shape
-    mp = ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
+    mp = _promp(n_basis, n_dof, float(duration), float(dt), width)
     pos, vel = mp.trajectory_numpy(weights.reshape(-1))
     return q0 + pos, vel
+
+
+@lru_cache(maxsize=256)
+def _promp(n_basis: int, n_dof: int, duration: float, dt: float, width: float | None) -> ProMP:
+    """The ProMP of one duration, built once: a task whose duration lies on the control grid
+    (beer pong: n·dt) reuses it; a ProMP is not changed by its use."""
+    return ProMP(n_basis, n_dof, duration=duration, dt=dt, width=width)
 
 
 def _excess(value: float, bounds: tuple[float, float] | None) -> float:

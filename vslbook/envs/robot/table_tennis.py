@@ -109,7 +109,6 @@ TAU_BOUNDS, DELAY_BOUNDS = (0.56, 1.5), (0.05, 0.6)
 BALL_Z0, BALL_VZ, BALL_VX_4D = 1.75, 0.5, 2.5
 GRAVITY, TABLE_HEIGHT, NET_HEIGHT, TABLE_X_END, TABLE_Y_HALF = 9.81, 0.77, 0.1, 1.1, 0.6
 UNSTABLE_RETURN = -25.0
-_SUBSTEPS = tuple(range(FRAME_SKIP * k, FRAME_SKIP * (k + 1)) for k in range(MAX_STEPS))
 #: Contact sensors added to the model in memory, one per geom the ball's contacts are sorted
 #: by (bat, back of the bat, floor, table): each reads how many contacts of the ball with
 #: that geom the step's contact list holds (``data="found"``). The compiled loop reads these
@@ -445,7 +444,7 @@ class TableTennis4D(EpisodicTask):
         for k in range(MAX_STEPS):
             sub(feedforward[k], mul(KP, q, tmp), ctrl)  # in place: (K_p q_d + K_d q̇_d - K_p q)
             sub(ctrl, mul(KD, dq, tmp), ctrl)  # - K_d q̇
-            for i in _SUBSTEPS[k]:  # rows 4k .. 4k + 3 of xs
+            for i in range(FRAME_SKIP * k, FRAME_SKIP * (k + 1)):  # rows of xs
                 if record is not None:  # the state whose positions mj_step leaves in xpos
                     record.append(qpos.copy())
                 step(m, d)
