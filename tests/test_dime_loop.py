@@ -145,10 +145,39 @@ def test_replay_round_trip():
     assert torch.equal(a.obs, b.obs) and torch.equal(a.reward, b.reward)
 
 
+def test_replay_indices_from_a_device_generator():
+    import numpy as np
+
+    from vslbook.srl.replay import replay_generator
+
+    buf = ReplayBuffer(50, 1, 1, torch.device("cpu"))
+    for i in range(30):  # 30 of 50 rows filled: indices must stay below 30
+        buf.add([i], [0.0], float(i), [i + 1], False)
+    gen = replay_generator("device", torch.device("cpu"), 7)
+    draws = torch.cat([buf.sample(64, gen).reward for _ in range(200)])
+    assert draws.min() == 0 and draws.max() == 29 and torch.equal(draws, draws.round())
+    counts = torch.bincount(draws.long(), minlength=30).double()  # uniform: chi-square test
+    chi2 = float(((counts - counts.mean()) ** 2 / counts.mean()).sum())
+    assert chi2 < 58.3  # the 0.999 quantile of chi-square with 29 degrees of freedom
+    again = replay_generator("device", torch.device("cpu"), 7)  # same seed, same batch
+    assert torch.equal(buf.sample(64, again).obs, buf.sample(64, replay_generator(
+        "device", torch.device("cpu"), 7)).obs)  # fmt: skip
+    assert replay_generator("auto", torch.device("cpu"), 7) is None  # CPU: numpy's stream
+    assert replay_generator("numpy", torch.device("cpu"), 7) is None
+    with pytest.raises(ValueError, match="unknown replay_sampler 'gpu'"):
+        replay_generator("gpu", torch.device("cpu"), 7)
+    on_meta = ReplayBuffer(4, 1, 1, torch.device("meta"))
+    on_meta.add([0.0], [0.0], 0.0, [0.0], False)
+    with pytest.raises(ValueError, match="the index generator is on cpu, the buffer on meta"):
+        on_meta.sample(2, gen)
+    assert buf.sample(3, np.random.default_rng(0)).obs.shape == (3, 1)
+
+
 @pytest.mark.parametrize(
     ("over", "match"),
     [
         (dict(v_min=5.0, v_max=5.0), "need v_min < v_max"),
+        (dict(replay_sampler="gpu"), "unknown replay_sampler 'gpu'"),
         (dict(n_diffusion_steps=0), "n_diffusion_steps must be an integer >= 1"),
         (dict(utd=0), "utd must be an integer >= 1"),
         (dict(policy="flow"), "unknown policy 'flow'"),

@@ -115,3 +115,27 @@ def test_seeds_at_different_steps_train_in_groups(tmp_path):
     got, want = _rows(both[1])[-1], _rows(alone)[-1]
     assert got["critic_updates"] == want["critic_updates"]
     assert got["alpha"] == pytest.approx(want["alpha"], rel=2e-3)
+
+
+def test_device_drawn_replay_indices_resume_exactly_in_either_loop(tmp_path):
+    """replay_sampler='device' (the GPU default) on the CPU: an interrupted run resumes to the
+    same numbers, the seed axis reproduces the single-seed loop, and the stream is not
+    numpy's."""
+    dev = {**TINY, "replay_sampler": "device"}
+    (whole,) = [run("dime", ENV, 6, "smoke", root=tmp_path / "a", overrides=dev,
+                    progress=False)]  # fmt: skip
+    part = run("dime", ENV, 6, "smoke", root=tmp_path / "b", overrides=dev, progress=False,
+               stop_after=130)  # fmt: skip
+    assert not part.done
+    part = run("dime", ENV, 6, "smoke", root=tmp_path / "b", overrides=dev, progress=False)
+    assert _no_clocks(_rows(whole)) == _no_clocks(_rows(part))
+    (stacked,) = run_seeds("dime", ENV, [6], "smoke", root=tmp_path / "c", overrides=dev,
+                           progress=False, stop_after=130)  # fmt: skip
+    (stacked,) = run_seeds("dime", ENV, [6], "smoke", root=tmp_path / "c", overrides=dev,
+                           progress=False)  # fmt: skip
+    ra, rb = _rows(whole)[-1], _rows(stacked)[-1]
+    for key in ("critic_loss", "q_mean", "alpha", "actor_loss", "train_return"):
+        assert rb[key] == pytest.approx(ra[key], rel=2e-3, abs=1e-3), key
+    numpy_drawn = run("dime", ENV, 6, "smoke", root=tmp_path / "d", overrides=TINY,
+                      progress=False)  # fmt: skip
+    assert _rows(numpy_drawn)[-1]["critic_loss"] != ra["critic_loss"]

@@ -199,3 +199,93 @@ def test_dime_runs_import_nothing_they_declare_independent_of(tmp_path):
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     assert "vslbook.srl.dime" in loaded
     assert not [m for m in loaded if m.startswith(("vslbook.erl", "vslbook.envs.robot"))]
+
+
+# ------------------------------------------------------------------ divergence on the device
+
+
+def test_finite_watch_keeps_the_first_non_finite_update():
+    watch = dime_loop.FiniteWatch(("a", "b", "c"), torch.device("cpu"))
+    watch.add(1, a=torch.tensor(1.0), b=torch.tensor(2.0))
+    watch.check()  # all finite: nothing to say
+    watch.add(2, c=torch.tensor(3.0))
+    watch.add(3, a=torch.tensor(0.5), b=torch.tensor(float("-inf")))
+    watch.add(4, a=torch.tensor(float("nan")), b=torch.tensor(1.0))  # later: not reported
+    watch.add(5, c=torch.tensor(float("nan")))
+    with pytest.raises(dime_loop.DivergenceError) as err:
+        watch.check()
+    assert (err.value.step, err.value.quantity, err.value.value) == (3, "b", float("-inf"))
+    watch.reset()
+    watch.add(9, c=torch.tensor(float("nan")))
+    with pytest.raises(dime_loop.DivergenceError, match="step 9: non-finite c"):
+        watch.check()
+
+
+def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
+    """Algorithm 4's updates (l. 7-10) and the finiteness watch with every way of reading a
+    tensor's value on the host disabled: no update waits for the device."""
+    from vslbook.srl.dime_updates import actor_update, alpha_update, critic_update, make_agent
+    from vslbook.srl.replay import ReplayBuffer
+
+    cfg = DIMEConfig(**{k: v for k, v in TINY.items() if k not in ("total_steps",)})
+    agent = make_agent(3, 1, cfg, v_min=-1600.0, v_max=100.0, device=torch.device("cpu"))
+    buffer = ReplayBuffer(64, 3, 1)
+    rng = np.random.default_rng(0)
+    for _ in range(64):
+        buffer.add(rng.normal(size=3), rng.uniform(-1, 1, 1), 0.1, rng.normal(size=3), False)
+    watch = dime_loop.FiniteWatch(dime_loop._WATCHED, torch.device("cpu"))
+    batches = [buffer.sample(16, rng) for _ in range(4)]  # indices drawn on the host
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("a host read of a tensor inside the update loop")
+
+    for name in ("item", "tolist", "__bool__", "__float__", "__int__", "__index__", "numpy"):
+        monkeypatch.setattr(torch.Tensor, name, refuse)
+    for k, batch in enumerate(batches):
+        stats = critic_update(agent, batch)
+        watch.add(k, critic_loss=stats.loss, q_mean=stats.value)
+        actor = actor_update(agent, batch.obs)
+        alpha_loss = alpha_update(agent, actor.running_cost)
+        watch.add(k, actor_loss=actor.loss, entropy_bound=actor.value, alpha_loss=alpha_loss)
+    monkeypatch.undo()
+    watch.check()
+    with pytest.raises(AssertionError, match="host read"):  # the guard itself bites
+        monkeypatch.setattr(torch.Tensor, "item", refuse)
+        torch.tensor(1.0).item()
+
+
+def test_a_diverged_policy_stops_the_run_before_it_acts(tmp_path, monkeypatch):
+    """Parameters gone non-finite in an update: the next action is non-finite, and the run
+    ends FAILED naming the update's quantity and step (not the action), before a simulator
+    that refuses non-finite controls (dm_control) would see one."""
+    real = dime_loop.critic_update
+    count = {"n": 0}
+
+    def update(agent, batch):
+        stats = real(agent, batch)
+        count["n"] += 1
+        if count["n"] == 7:  # in env step 4
+            with torch.no_grad():
+                agent.policy.score_net.out.bias.fill_(float("nan"))
+            return stats._replace(value=torch.tensor(float("nan")))
+        return stats
+
+    monkeypatch.setattr(dime_loop, "critic_update", update)
+    with pytest.warns(UserWarning, match="diverged at step 4: non-finite q_mean"):
+        rd = run("dime", ENV, 0, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert rd.failure["step"] == 4 and rd.failure["quantity"] == "q_mean"
+    assert count["n"] == 8  # step 4's second update ran (its loss NaN); step 5's action stopped it
+
+    def silent(agent, batch):  # the parameters diverge, the losses say nothing
+        stats = real(agent, batch)
+        count["n"] += 1
+        if count["n"] == 4:  # step 2's second update; the next actor update would be the 6th
+            with torch.no_grad():
+                agent.policy.score_net.out.bias.fill_(float("nan"))
+        return stats
+
+    count["n"] = 0
+    monkeypatch.setattr(dime_loop, "critic_update", silent)
+    with pytest.warns(UserWarning, match="diverged at step 3: non-finite action"):
+        rd = run("dime", ENV, 1, "smoke", root=tmp_path, overrides=TINY, progress=False)
+    assert rd.failure["quantity"] == "action"

@@ -220,6 +220,22 @@ def test_c51_projection_exact_grid_hits_and_out_of_range():
     assert_close(low, torch.tensor([1.0, 0, 0, 0, 0]).expand(3, 5))
 
 
+def test_c51_projection_of_a_nan_target_is_nan_and_leaves_other_rows_alone():
+    support = CategoricalSupport(-2.0, 2.0, 5)
+    probs = torch.softmax(torch.randn(3, 5, generator=torch.Generator().manual_seed(0)), -1)
+    values = torch.tensor([[0.3, -1.2, 5.0, 0.0, 1.5]] * 3)
+    values[1, 2] = float("nan")  # one diverged atom poisons its row only
+    values[2, 0] = float("inf")  # ±inf is clipped to the support like any large value
+    out = support.project(values, probs)
+    assert torch.isnan(out[1]).all()
+    clipped = values[2].clone()
+    clipped[0] = 2.0
+    assert_close(out[0], support.project(values[:1], probs[:1])[0])
+    assert_close(out[2], support.project(clipped[None], probs[2:])[0])
+    expected = _brute_project(values[[0]].numpy(), probs[[0]].numpy(), -2.0, 2.0, 5)
+    np.testing.assert_allclose(out[[0]].numpy(), expected, atol=1e-6)
+
+
 def test_bellman_atoms_mean_and_categorical_loss():
     support = CategoricalSupport(-5.0, 5.0, 11)
     reward, done = torch.tensor([1.0, 2.0]), torch.tensor([0.0, 1.0])

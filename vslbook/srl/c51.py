@@ -59,6 +59,8 @@ class CategoricalSupport(nn.Module):
         gives (u - b) of its mass to atom l = floor(b) and (b - l) to atom u = ceil(b). Writing
         the lower weight as 1 - (b - l) also covers the exact hit l == u (all mass to l).
         Returns distributions on the support, shape (B, n_atoms); rows keep their total mass.
+        A row with a NaN value (a diverged target) comes back as NaNs, so the loss shows the
+        divergence instead of the scatter failing on an invalid index.
         """
         if values.shape != probs.shape or values.shape[-1] != self.n_atoms:
             raise ValueError(
@@ -67,13 +69,15 @@ class CategoricalSupport(nn.Module):
             )
         b = (values.clamp(self.v_min, self.v_max) - self.v_min) / self.delta
         b = b.clamp(0.0, self.n_atoms - 1)  # guard against rounding just past the ends
+        nan = b.isnan()  # clamp keeps NaN (±inf go to the ends)
+        b = b.masked_fill(nan, 0.0)
         lower = b.floor()
         upper = b.ceil()
         upper_weight = b - lower
         projected = torch.zeros_like(probs)
         projected.scatter_add_(-1, lower.long(), probs * (1.0 - upper_weight))
         projected.scatter_add_(-1, upper.long(), probs * upper_weight)
-        return projected
+        return projected.masked_fill(nan.any(dim=-1, keepdim=True), float("nan"))
 
 
 def categorical_loss(logits: Tensor, target_probs: Tensor, entropy_coef: float = 0.005) -> Tensor:

@@ -22,10 +22,12 @@ checkpoints are written at episode boundaries only, and a run resumed from one l
 the numbers an uninterrupted run logs on CPU (all metrics except the wall-clock rates
 ``critic_updates_per_s`` and ``env_steps_per_s``).
 
-Divergence. Every update's losses, the critic's mean Q and the entropy bound are checked
-for finiteness (one host sync per update), the parameters and log α at every evaluation;
-the first non-finite one raises :class:`vslbook.results.DivergenceError` naming the step and
-the quantity, and :func:`vslbook.training.run` marks the run FAILED instead of DONE.
+Divergence. Every update's losses, the critic's mean Q and the entropy bound are watched
+for finiteness on the device (:class:`FiniteWatch`, no host sync per update) and checked at
+every evaluation and episode end, the parameters and log α at every evaluation; the first
+non-finite one raises :class:`vslbook.results.DivergenceError` naming the step of the update
+that produced it and the quantity, and :func:`vslbook.training.run` marks the run FAILED
+instead of DONE.
 """
 
 from __future__ import annotations
@@ -57,7 +59,7 @@ from vslbook.srl.dime_updates import (
     q_values,
     resolve_device,
 )
-from vslbook.srl.replay import ReplayBuffer
+from vslbook.srl.replay import ReplayBuffer, replay_generator
 
 __all__ = [
     "Agent",
@@ -137,7 +139,7 @@ def _stream_seed(seed: int, stream: int, *index: int) -> int:
     return int(np.random.SeedSequence([seed, stream, *index]).generate_state(1)[0])
 
 
-TRAIN_RESETS, EVAL_RESETS, EVAL_NOISE = 0, 1, 2
+TRAIN_RESETS, EVAL_RESETS, EVAL_NOISE, REPLAY_INDICES = 0, 1, 2, 3
 
 
 def _to_env_action(action: np.ndarray, space: gym.spaces.Box) -> np.ndarray:
@@ -247,13 +249,45 @@ def eval_row(
     return row
 
 
-def _require_finite(step: int, **values: Tensor) -> None:
-    """Raise :class:`DivergenceError` naming the first non-finite value (one host sync)."""
-    stacked = torch.stack([v.detach().reshape(()).float() for v in values.values()])
-    if not bool(torch.isfinite(stacked).all()):
-        for name, value in values.items():
-            if not bool(torch.isfinite(value).all()):
-                raise DivergenceError(step, name, float(value.detach().reshape(())))
+class FiniteWatch:
+    """The update losses' finiteness, watched on the device without a host sync per update.
+
+    :meth:`add` records, with tensor operations only, the environment step and the values of
+    the first update that produced a non-finite one; :meth:`check` (one host sync) raises
+    :class:`DivergenceError` naming that step and quantity. The training loop checks at every
+    evaluation and episode end, before a checkpoint is written, so a diverged agent is never
+    saved and a GPU's queue of updates is never drained just to look at a loss.
+    """
+
+    def __init__(self, names: tuple[str, ...], device: torch.device) -> None:
+        self.names = tuple(names)
+        self.device = device
+        self.reset()
+
+    def reset(self) -> None:
+        self.first_step = torch.full((), -1, dtype=torch.int64, device=self.device)
+        self.first_values = torch.zeros(len(self.names), dtype=torch.float64, device=self.device)
+
+    def add(self, step: int, **values: Tensor) -> None:
+        """Watch ``values`` (0-d tensors; a subset of ``names``) of the update at ``step``."""
+        idx = [self.names.index(name) for name in values]
+        v = torch.stack([x.detach().reshape(()).to(torch.float64) for x in values.values()])
+        first = (~torch.isfinite(v).all()) & (self.first_step < 0)
+        self.first_step = torch.where(first, step, self.first_step)
+        rows = torch.tensor(idx, device=self.device)
+        self.first_values[rows] = torch.where(first, v, self.first_values[rows])
+
+    def check(self) -> None:
+        """Raise :class:`DivergenceError` for the first non-finite update seen (one sync)."""
+        step = int(self.first_step.item())
+        if step < 0:
+            return
+        values = self.first_values.tolist()
+        k = next(i for i, x in enumerate(values) if not np.isfinite(x))
+        raise DivergenceError(step, self.names[k], values[k])
+
+
+_WATCHED = ("critic_loss", "q_mean", "actor_loss", "entropy_bound", "alpha_loss")
 
 
 def _require_finite_parameters(step: int, agent: Agent) -> None:
@@ -310,10 +344,12 @@ def train(
         v_min, v_max = default_value_range(env_id)
     agent = make_agent(obs_dim, act_dim, cfg, v_min=v_min, v_max=v_max, device=device)
     buffer = ReplayBuffer(min(cfg.buffer_size, total_steps), obs_dim, act_dim, device)
+    indices = replay_generator(cfg.replay_sampler, device, _stream_seed(seed, REPLAY_INDICES))
     critic_step, actor_step = critic_update, actor_update
     if cfg.compile:
         critic_step, actor_step = torch.compile(critic_update), torch.compile(actor_update)
     diag = _Means(device)
+    watch = FiniteWatch(_WATCHED, device)
 
     step = episode = n_updates = n_evals = 0
     last_eval: dict[str, Any] = {}
@@ -330,6 +366,8 @@ def train(
         )
         last_eval = state["last_eval"]
         restore_rng_state(state["rng"], rng)
+        if indices is not None:
+            indices.set_state(state["replay_indices"])
         episode_actions = state.get("episode_actions", [])
         episode_return = float(state.get("episode_return", 0.0))
 
@@ -345,8 +383,30 @@ def train(
                 "evals": n_evals,
                 "last_eval": last_eval,
                 "rng": rng_state(rng),
+                "replay_indices": None if indices is None else indices.get_state(),
             }
         )
+
+    def update_step() -> None:
+        """l. 7-10: ``utd`` critic updates; the actor and α after every ``policy_delay``-th."""
+        nonlocal n_updates
+        for _ in range(cfg.utd):
+            batch = buffer.sample(cfg.batch_size, rng if indices is None else indices)
+            critic_stats = critic_step(agent, batch)
+            watch.add(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
+            diag.add("critic_loss", critic_stats.loss)
+            diag.add("q_mean", critic_stats.value)
+            n_updates += 1
+            if n_updates % cfg.policy_delay == 0:  # l. 8-10: actor (5.27) and α (5.28)
+                actor_stats = actor_step(agent, batch.obs)
+                alpha_loss = alpha_update(agent, actor_stats.running_cost)
+                watch.add(
+                    step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
+                    alpha_loss=alpha_loss,
+                )  # fmt: skip
+                diag.add("actor_loss", actor_stats.loss)
+                diag.add("entropy_bound", actor_stats.value)
+                diag.add("running_cost", actor_stats.running_cost.mean())
 
     bar = tqdm(
         total=total_steps,
@@ -365,7 +425,10 @@ def train(
         if step < learning_starts:
             action = rng.uniform(-1.0, 1.0, size=act_dim).astype(np.float32)
         else:
-            action = act(agent.policy, obs, device)
+            action = act(agent.policy, obs, device)  # the one host sync of an env step
+            if not np.isfinite(action).all():  # a diverged update shows here first
+                watch.check()
+                raise DivergenceError(step + 1, "action", float(action[~np.isfinite(action)][0]))
         next_obs, reward, terminated, truncated, info = env.step(
             _to_env_action(action, env.action_space)
         )
@@ -375,25 +438,15 @@ def train(
         steps_this_call += 1
 
         if step >= learning_starts:
-            for _ in range(cfg.utd):  # l. 7: UTD critic updates per environment step
-                batch = buffer.sample(cfg.batch_size, rng)
-                critic_stats = critic_step(agent, batch)
-                _require_finite(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
-                diag.add("critic_loss", critic_stats.loss)
-                diag.add("q_mean", critic_stats.value)
-                n_updates += 1
-                if n_updates % cfg.policy_delay == 0:  # l. 8-10: actor (5.27) and α (5.28)
-                    actor_stats = actor_step(agent, batch.obs)
-                    alpha_loss = alpha_update(agent, actor_stats.running_cost)
-                    _require_finite(
-                        step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
-                        alpha_loss=alpha_loss,
-                    )  # fmt: skip
-                    diag.add("actor_loss", actor_stats.loss)
-                    diag.add("entropy_bound", actor_stats.value)
-                    diag.add("running_cost", actor_stats.running_cost.mean())
+            try:
+                update_step()
+            except Exception as err:  # an update failing on an earlier update's non-finite
+                if not isinstance(err, DivergenceError):  # output says so; else its own error
+                    watch.check()
+                raise
 
         if step % eval_every == 0 or step == total_steps:
+            watch.check()
             _require_finite_parameters(step, agent)
             eval_return, eval_success = evaluate(
                 agent.policy, eval_env, seed=seed, index=n_evals, episodes=eval_episodes,
@@ -414,6 +467,7 @@ def train(
         bar.update(1)
 
         if terminated or truncated:  # episode boundary: reset, maybe checkpoint or stop
+            watch.check()
             diag.add("train_return", episode_return)
             episode += 1
             obs, _ = env.reset(seed=_stream_seed(seed, TRAIN_RESETS, episode))
@@ -426,6 +480,7 @@ def train(
                 bar.close()
                 return None
     bar.close()
+    watch.check()
     checkpoint(final=True)  # networks for later analysis; the replay buffer is dropped
     return {
         "env_steps": total_steps,

@@ -16,6 +16,8 @@ from typing import Any
 
 import torch
 
+from vslbook.srl.replay import REPLAY_SAMPLERS
+
 POLICIES = ("diffusion", "gaussian")
 CRITICS = ("distributional", "scalar")
 Q_REDUCTIONS = ("mean", "min")
@@ -76,6 +78,10 @@ class DIMEConfig:
         use_target_network: Polyak-averaged target critics for s' (the point-mass study of
             Fig. 5.7) instead of CrossQ's joint batch; ``tau`` is the averaging rate.
         device: ``"auto"`` (cuda if available, else cpu) or a torch device string.
+        replay_sampler: where the replay indices are drawn: ``"numpy"`` (the run's numpy
+            Generator, copied to the device per batch), ``"device"`` (a torch Generator on
+            the device, no host-to-device copy in the update loop) or ``"auto"`` (numpy on
+            a CPU, the device elsewhere). The two are different random streams.
         compile: wrap the update functions in ``torch.compile``.
         num_threads: torch CPU threads (0 leaves torch's default).
     """
@@ -119,6 +125,7 @@ class DIMEConfig:
     use_target_network: bool = False
     tau: float = 0.005
     device: str = "auto"
+    replay_sampler: str = "auto"
     compile: bool = False
     num_threads: int = 0
 
@@ -154,6 +161,7 @@ class DIMEConfig:
             ("policy", self.policy, POLICIES),
             ("critic", self.critic, CRITICS),
             ("q_reduce", self.q_reduce, Q_REDUCTIONS),
+            ("replay_sampler", self.replay_sampler, REPLAY_SAMPLERS),
         ):
             if value not in allowed:
                 raise ValueError(f"unknown {name} {value!r}; expected one of {', '.join(allowed)}")

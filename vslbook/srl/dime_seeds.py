@@ -33,7 +33,7 @@ from vslbook.seeding import seed_everything
 from vslbook.srl import dime
 from vslbook.srl.dime_config import DIMEConfig
 from vslbook.srl.dime_updates import make_agent, resolve_device
-from vslbook.srl.replay import Batch, ReplayBuffer
+from vslbook.srl.replay import Batch, ReplayBuffer, replay_generator
 from vslbook.srl.seed_axis import SeedStack
 
 __all__ = ["train_seeds"]
@@ -58,6 +58,9 @@ class _Seed:
         self.generator.set_state(torch.get_rng_state())  # the global stream after the init
         total = budget.scale(cfg.total_steps)
         self.buffer = ReplayBuffer(min(cfg.buffer_size, total), obs_dim, act_dim, device)
+        self.indices = replay_generator(
+            cfg.replay_sampler, device, dime._stream_seed(self.seed, dime.REPLAY_INDICES)
+        )
         self.diag = dime._Means(device)
         self.step = self.episode = self.updates = self.evals = 0
         self.last_eval: dict[str, Any] = {}
@@ -75,6 +78,8 @@ class _Seed:
             self.last_eval = state["last_eval"]
             restore_rng_state(state["rng"], self.rng)
             self.generator.set_state(torch.get_rng_state())
+            if self.indices is not None:
+                self.indices.set_state(state["replay_indices"])
             self.actions = [np.asarray(a, np.float32) for a in state.get("episode_actions", [])]
             self.episode_return = float(state.get("episode_return", 0.0))
         self.obs = self._replay()
@@ -104,6 +109,7 @@ class _Seed:
                 "evals": self.evals,
                 "last_eval": self.last_eval,
                 "rng": rng,
+                "replay_indices": None if self.indices is None else self.indices.get_state(),
                 "episode_actions": [a.tolist() for a in self.actions],
                 "episode_return": self.episode_return,
             }
@@ -233,7 +239,10 @@ def _train_group(
 
         if step >= learning_starts:
             for _ in range(cfg.utd):
-                batches = [s.buffer.sample(cfg.batch_size, s.rng) for s in own]
+                batches = [
+                    s.buffer.sample(cfg.batch_size, s.rng if s.indices is None else s.indices)
+                    for s in own
+                ]
                 batch = Batch(*[torch.stack(x) for x in zip(*batches, strict=True)])
                 noise = stack.noise([s.generator for s in own], cfg.batch_size)
                 critic_stats = stack.critic_update(batch, noise)

@@ -101,7 +101,8 @@ def resolve_device(name: str) -> torch.device:
 
 
 def _adam(params, lr: float, beta1: float, device: torch.device) -> torch.optim.Adam:
-    # fused Adam (one kernel for all tensors) where torch has it for this device
+    # fused Adam (one kernel for all tensors) where torch has it for this device; its step
+    # counter lives on the device, so a step never reads a tensor on the host
     fused = device.type in ("cuda", "cpu")
     return torch.optim.Adam(params, lr=lr, betas=(beta1, 0.999), fused=fused)
 
@@ -162,7 +163,7 @@ def make_agent(
     alpha_opt = None
     if cfg.fixed_alpha is None:
         log_alpha.requires_grad_(True)
-        alpha_opt = torch.optim.Adam([log_alpha], lr=cfg.alpha_lr)
+        alpha_opt = _adam([log_alpha], cfg.alpha_lr, 0.9, device)  # torch's default betas
     return Agent(
         cfg=cfg,
         policy=policy,

@@ -8,6 +8,11 @@ terminal state stops the bootstrap.
 
 ``state_dict`` holds only the filled rows (plus the write position), so a checkpoint taken
 early in training is small, and ``load_state_dict`` restores the buffer bit for bit.
+
+Indices come from a numpy Generator (copied to the device per batch: the CPU default, so CPU
+runs keep their random stream) or from a ``torch.Generator`` on the buffer's device
+(:func:`replay_generator`), where drawing a batch needs nothing from the host: on a GPU a
+copy from pageable host memory would wait for every queued kernel first.
 """
 
 from __future__ import annotations
@@ -85,13 +90,24 @@ class ReplayBuffer:
         self.ptr = (row + 1) % self.capacity
         self.size = min(self.size + 1, self.capacity)
 
-    def sample(self, batch_size: int, generator: np.random.Generator) -> Batch:
-        """``batch_size`` transitions, uniform with replacement; indices from ``generator``."""
+    def sample(self, batch_size: int, generator: np.random.Generator | torch.Generator) -> Batch:
+        """``batch_size`` transitions, uniform with replacement; indices from ``generator``
+        (numpy's, on the host, or a ``torch.Generator`` on this buffer's device)."""
         if batch_size < 1:
             raise ValueError(f"batch_size must be >= 1, got {batch_size}")
         if self.size == 0:
             raise ValueError("cannot sample from an empty replay buffer")
-        idx = torch.from_numpy(generator.integers(0, self.size, size=batch_size)).to(self.device)
+        if isinstance(generator, torch.Generator):
+            if generator.device.type != self.device.type:
+                raise ValueError(
+                    f"the index generator is on {generator.device}, the buffer on {self.device}"
+                )
+            idx = torch.randint(
+                0, self.size, (batch_size,), generator=generator, device=self.device
+            )
+        else:
+            idx = torch.from_numpy(generator.integers(0, self.size, size=batch_size))
+            idx = idx.to(self.device)
         return Batch(*(getattr(self, name).index_select(0, idx) for name in self.FIELDS))
 
     def state_dict(self) -> dict[str, Any]:
@@ -118,3 +134,20 @@ class ReplayBuffer:
                 )
             target[:size] = stored.to(self.device)
         self.size, self.ptr = size, int(state["ptr"])
+
+
+#: How replay indices are drawn (``DIMEConfig.replay_sampler``): ``"numpy"`` on the host,
+#: ``"device"`` by a ``torch.Generator`` on the training device, ``"auto"`` numpy on a CPU and
+#: the device elsewhere.
+REPLAY_SAMPLERS = ("auto", "numpy", "device")
+
+
+def replay_generator(sampler: str, device: torch.device, seed: int) -> torch.Generator | None:
+    """The device stream for the replay indices, seeded by ``seed``; None where the indices
+    come from the run's numpy Generator (``sampler`` ``"numpy"``, or ``"auto"`` on a CPU)."""
+    if sampler not in REPLAY_SAMPLERS:
+        raise ValueError(f"unknown replay_sampler {sampler!r}; expected one of {REPLAY_SAMPLERS}")
+    device = torch.device(device)
+    if sampler == "numpy" or (sampler == "auto" and device.type == "cpu"):
+        return None
+    return torch.Generator(device=device).manual_seed(int(seed))

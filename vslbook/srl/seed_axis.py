@@ -160,7 +160,7 @@ class SeedStack:
         self.alpha_opt = None
         if cfg.fixed_alpha is None:
             self.log_alpha.requires_grad_(True)
-            self.alpha_opt = torch.optim.Adam([self.log_alpha], lr=cfg.alpha_lr)
+            self.alpha_opt = _adam([self.log_alpha], cfg.alpha_lr, 0.9)
             alpha_state = _stack_adam_state([a.alpha_opt for a in agents], [self.log_alpha])
             _load_adam(self.alpha_opt, [self.log_alpha], alpha_state)
 
