@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 
 import pytest
+import torch
 
 from vslbook.cli import main
 from vslbook.training import run, run_seeds
@@ -139,3 +140,39 @@ def test_device_drawn_replay_indices_resume_exactly_in_either_loop(tmp_path):
     numpy_drawn = run("dime", ENV, 6, "smoke", root=tmp_path / "d", overrides=TINY,
                       progress=False)  # fmt: skip
     assert _rows(numpy_drawn)[-1]["critic_loss"] != ra["critic_loss"]
+
+
+def test_a_diverged_seed_leaves_the_stack_and_the_others_finish(tmp_path, monkeypatch):
+    """Seed 8's policy goes non-finite in the 7th stacked update (env step 53): it is marked
+    FAILED naming that update; seeds 7 and 9 finish as they do in an undisturbed stack."""
+    from vslbook.srl import seed_axis
+
+    clean = run_seeds("dime", ENV, [7, 8, 9], "smoke", root=tmp_path / "a", overrides=TINY,
+                      progress=False)  # fmt: skip
+    real = seed_axis.SeedStack.critic_update
+    calls = {"n": 0}
+
+    def update(self, batch, noise):
+        stats = real(self, batch, noise)
+        calls["n"] += 1
+        if calls["n"] == 7 and self.n_seeds == 3:
+            with torch.no_grad():
+                for name, p in self.params.items():
+                    if name.startswith("policy."):
+                        p[1].fill_(float("nan"))  # seed 8 is position 1
+            value = stats.value.clone()
+            value[1] = float("nan")
+            return stats._replace(value=value)
+        return stats
+
+    monkeypatch.setattr(seed_axis.SeedStack, "critic_update", update)
+    with pytest.warns(UserWarning, match="diverged at step 53: non-finite q_mean"):
+        hit = run_seeds("dime", ENV, [7, 8, 9], "smoke", root=tmp_path / "b", overrides=TINY,
+                        progress=False)  # fmt: skip
+    assert [rd.status for rd in hit] == ["done", "failed", "done"]
+    assert hit[1].failure["step"] == 53 and hit[1].failure["quantity"] == "q_mean"
+    for a, b in ((clean[0], hit[0]), (clean[2], hit[2])):
+        ra, rb = _rows(a)[-1], _rows(b)[-1]
+        assert ra["critic_updates"] == rb["critic_updates"]
+        for key in ("critic_loss", "q_mean", "alpha", "actor_loss", "train_return"):
+            assert rb[key] == pytest.approx(ra[key], rel=2e-3, abs=1e-3), key

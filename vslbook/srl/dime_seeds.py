@@ -192,28 +192,24 @@ def _train_group(
     next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
     steps_this_call = 0
 
-    def drop(failed: list[int], err: DivergenceError) -> SeedStack:
-        """Mark ``failed`` (positions in ``live``) FAILED and stack the others again."""
-        for pos in failed:
+    watch = dime.FiniteWatch(dime._WATCHED, device, seeds=len(live))  # positions in `live`
+
+    def drop(errors: dict[int, DivergenceError]) -> None:
+        """Mark the seeds at these positions in ``live`` FAILED and stack the others again."""
+        nonlocal stack
+        if not errors:
+            return
+        for pos, err in errors.items():
             seeds[live[pos]].run.mark_failed(err)
             results[live[pos]] = err
-        keep = [i for pos, i in enumerate(live) if pos not in failed]
-        states = {i: stack.agent_state(pos) for pos, i in enumerate(live) if i in keep}
-        for i in keep:
-            seeds[i].agent.load_state_dict(states[i])
-        live[:] = keep
-        return SeedStack([seeds[i].agent for i in keep]) if keep else stack
-
-    def failed_paths() -> set:
-        return {seeds[i].run.path for i in range(len(seeds)) if i not in live}
-
-    def check(values: dict[str, torch.Tensor]) -> None:
-        nonlocal stack
-        bad = ~torch.stack([v.reshape(len(live)) for v in values.values()]).isfinite().all(0)
-        if bool(bad.any()):
-            failed = [int(p) for p in torch.nonzero(bad).flatten()]
-            name = next(k for k, v in values.items() if not bool(v[failed[0]].isfinite()))
-            stack = drop(failed, DivergenceError(step, name, float(values[name][failed[0]])))
+        kept = [pos for pos in range(len(live)) if pos not in errors]
+        states = {live[pos]: stack.agent_state(pos) for pos in kept}
+        for i, state in states.items():
+            seeds[i].agent.load_state_dict(state)
+        live[:] = list(states)
+        watch.keep(kept)
+        if live:
+            stack = SeedStack([seeds[i].agent for i in live])
 
     while step < total_steps and live:
         own = [seeds[i] for i in live]
@@ -223,9 +219,22 @@ def _train_group(
             obs = torch.as_tensor(np.stack([s.obs for s in own]), dtype=torch.float32,
                                   device=device)  # fmt: skip
             noise = stack.noise([s.generator for s in own], 1)
-            actions = list(stack.act(obs, noise).cpu().numpy())
-        ends = []
-        for s, a in zip(own, actions, strict=True):
+            actions = list(stack.act(obs, noise).cpu().numpy())  # the env step's host sync
+            bad = [pos for pos, a in enumerate(actions) if not np.isfinite(a).all()]
+            if bad:  # a diverged seed shows here first: name its update if the watch saw it
+                errors = watch.failures()
+                for pos in bad:
+                    a = actions[pos]
+                    errors.setdefault(
+                        pos, DivergenceError(step + 1, "action", float(a[~np.isfinite(a)][0]))
+                    )
+                actions = [a for pos, a in enumerate(actions) if pos not in errors]
+                drop(errors)
+                own = [seeds[i] for i in live]
+                if not live:
+                    break
+        ended: dict[int, bool] = {}  # seed index -> its episode ended at this step
+        for i, s, a in zip(live, own, actions, strict=True):
             next_obs, reward, terminated, truncated, _ = s.env.step(
                 dime._to_env_action(a, s.env.action_space)
             )
@@ -233,7 +242,7 @@ def _train_group(
             s.obs, s.episode_return = next_obs, s.episode_return + float(reward)
             s.actions.append(np.asarray(a))
             s.step += 1
-            ends.append(terminated or truncated)
+            ended[i] = terminated or truncated
         step += 1
         steps_this_call += 1
 
@@ -248,9 +257,7 @@ def _train_group(
                 critic_stats = stack.critic_update(batch, noise)
                 for s in own:
                     s.updates += 1
-                check({"critic_loss": critic_stats.loss, "q_mean": critic_stats.value})
-                if len(live) != len(own):
-                    break
+                watch.add(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
                 for k, s in enumerate(own):
                     s.diag.add("critic_loss", critic_stats.loss[k])
                     s.diag.add("q_mean", critic_stats.value[k])
@@ -258,27 +265,32 @@ def _train_group(
                     noise = stack.noise([s.generator for s in own], cfg.batch_size)
                     actor_stats = stack.actor_update(batch.obs, noise)
                     alpha_loss = stack.alpha_update(actor_stats.running_cost)
-                    check({"actor_loss": actor_stats.loss, "entropy_bound": actor_stats.value,
-                           "alpha_loss": alpha_loss})  # fmt: skip
-                    if len(live) != len(own):
-                        break
+                    watch.add(step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
+                              alpha_loss=alpha_loss)  # fmt: skip
                     for k, s in enumerate(own):
                         s.diag.add("actor_loss", actor_stats.loss[k])
                         s.diag.add("entropy_bound", actor_stats.value[k])
                         s.diag.add("running_cost", actor_stats.running_cost[k].mean())
-            if len(live) != len(own):
-                continue  # a seed left the stack; the others go on from the next step
 
-        if step % eval_every == 0 or step == total_steps:
-            now = time.perf_counter()
-            elapsed = max(now - clock, 1e-9)
+        stopping = stop_after is not None and steps_this_call >= stop_after
+        checkpointing = step < total_steps and (step >= next_checkpoint or stopping)
+        evaluating = step % eval_every == 0 or step == total_steps
+        if any(ended.values()) or checkpointing or evaluating or step == total_steps:
+            drop(watch.failures())  # before anything is evaluated or saved
+            own = [seeds[i] for i in live]
+        if evaluating:
+            errors = {}
             for k, s in enumerate(own):
                 s.agent.load_state_dict(stack.agent_state(k))  # its policy, as one module
                 try:
                     dime._require_finite_parameters(step, s.agent)
                 except DivergenceError as err:
-                    stack = drop([k], err)
-                    continue
+                    errors[k] = err
+            drop(errors)
+            own = [seeds[i] for i in live]
+            now = time.perf_counter()
+            elapsed = max(now - clock, 1e-9)
+            for s in own:
                 ret, success = dime.evaluate(
                     s.agent.policy, s.eval_env, seed=s.seed, index=s.evals,
                     episodes=eval_episodes, device=device,
@@ -295,16 +307,16 @@ def _train_group(
             updates_at_clock = seeds[live[0]].updates if live else 0
         bar.update(1)
 
-        for s, ended in zip(own, ends, strict=True):
-            if ended and s.run.path not in failed_paths():
+        for i in live:
+            s = seeds[i]
+            if ended[i]:
                 s.diag.add("train_return", s.episode_return)
                 s.episode += 1
                 s.actions, s.episode_return = [], 0.0
                 s.obs, _ = s.env.reset(
                     seed=dime._stream_seed(s.seed, dime.TRAIN_RESETS, s.episode)
                 )
-        stopping = stop_after is not None and steps_this_call >= stop_after
-        if step < total_steps and (step >= next_checkpoint or stopping):
+        if checkpointing:
             for k, i in enumerate(live):
                 seeds[i].checkpoint(stack, k)
             next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
