@@ -222,8 +222,9 @@ def test_finite_watch_keeps_the_first_non_finite_update():
 
 
 def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
-    """Algorithm 4's updates (l. 7-10) and the finiteness watch with every way of reading a
-    tensor's value on the host disabled: no update waits for the device."""
+    """Algorithm 4's updates (l. 7-10), one seed and on the seed axis, and the finiteness
+    watch with every way of reading a tensor's value on the host disabled: no update waits
+    for the device."""
     from vslbook.srl.dime_updates import actor_update, alpha_update, critic_update, make_agent
     from vslbook.srl.replay import ReplayBuffer
 
@@ -235,6 +236,15 @@ def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
         buffer.add(rng.normal(size=3), rng.uniform(-1, 1, 1), 0.1, rng.normal(size=3), False)
     watch = dime_loop.FiniteWatch(dime_loop._WATCHED, torch.device("cpu"))
     batches = [buffer.sample(16, rng) for _ in range(4)]  # indices drawn on the host
+    from vslbook.srl.replay import Batch
+    from vslbook.srl.seed_axis import SeedStack
+
+    cpu = torch.device("cpu")
+    stack = SeedStack([make_agent(3, 1, cfg, v_min=-1600.0, v_max=100.0, device=cpu)
+                       for _ in range(2)])  # fmt: skip
+    seed_watch = dime_loop.FiniteWatch(dime_loop._WATCHED, cpu, seeds=2)
+    gens = [torch.Generator().manual_seed(s) for s in (0, 1)]
+    noises = [(stack.noise(gens, 16), stack.noise(gens, 16)) for _ in batches]
 
     def refuse(*args, **kwargs):
         raise AssertionError("a host read of a tensor inside the update loop")
@@ -247,8 +257,15 @@ def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
         actor = actor_update(agent, batch.obs)
         alpha_loss = alpha_update(agent, actor.running_cost)
         watch.add(k, actor_loss=actor.loss, entropy_bound=actor.value, alpha_loss=alpha_loss)
+        two = Batch(*[torch.stack([x, x]) for x in batch])  # the seed axis: S = 2
+        stats = stack.critic_update(two, noises[k][0])
+        seed_watch.add(k, critic_loss=stats.loss, q_mean=stats.value)
+        actor = stack.actor_update(two.obs, noises[k][1])
+        alpha_loss = stack.alpha_update(actor.running_cost)
+        seed_watch.add(k, actor_loss=actor.loss, entropy_bound=actor.value, alpha_loss=alpha_loss)
     monkeypatch.undo()
     watch.check()
+    assert seed_watch.failures() == {}
     with pytest.raises(AssertionError, match="host read"):  # the guard itself bites
         monkeypatch.setattr(torch.Tensor, "item", refuse)
         torch.tensor(1.0).item()
