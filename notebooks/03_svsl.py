@@ -550,9 +550,25 @@ from vslbook.experiments import svsl_reacher as RE
 t0 = time.perf_counter()
 reacher_runs = RE.reacher_runs(root, budget)
 print(f"reacher runs ready in {time.perf_counter() - t0:.0f} s")
-fig = RE.draw_fig_3_5(RE.reacher_curves(reacher_runs), budget)
+reacher_curves = RE.reacher_curves(reacher_runs)
+fig = RE.draw_fig_3_5(reacher_curves, budget)
 save_figure(fig, "fig-3-5-reacher")
 plt.show()
+
+# %% [markdown]
+# The last evaluation of every run, IQM and 95 % CI over the seeds, and which method is
+# ahead next to the method the thesis reports ahead:
+
+# %%
+finals = RE.final_returns(reacher_curves, reps=budget.bootstrap_reps)
+for reward, rows in finals.groupby("reward", sort=False):
+    for r in rows.itertuples():
+        print(f"Eq. {reward} {r.method:>4}: {r.iqm:11.1f} [{r.ci_low:.1f}, {r.ci_high:.1f}] "
+              f"({r.runs} runs)")  # fmt: skip
+    verdict = rows["as_in_thesis"].iloc[0]
+    if verdict is not None:
+        print(f"  ahead: {rows['ahead'].iloc[0]}; the thesis: {RE.THESIS_AHEAD[reward]} -> "
+              f"{'as in the thesis' if verdict else 'NOT as in the thesis'}")
 
 # %% [markdown]
 # ## 9. Fig. 3.2 (table tennis) and Fig. A.2

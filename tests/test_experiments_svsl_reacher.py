@@ -7,7 +7,9 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
+import pandas as pd
 import pytest
+from scipy.stats import trim_mean
 
 from vslbook.envs.robot import make_task
 from vslbook.erl.ppo import PPOConfig
@@ -162,3 +164,26 @@ def test_figure(tiny_runs: dict) -> None:
     texts = " ".join(t.get_text() for t in fig.texts)
     assert "smoke" in texts and "thesis 20" in texts
     matplotlib.pyplot.close(fig)
+
+
+def test_final_returns_take_each_runs_last_evaluation_and_compare_with_the_thesis() -> None:
+    rows = []
+    for seed, (ppo, svsl) in enumerate([(-10.0, -50.0), (-20.0, -40.0), (-30.0, -60.0),
+                                        (-1000.0, -45.0)]):  # fmt: skip
+        rows += [("PPO", "3.8", seed, 10.0, 999.0), ("PPO", "3.8", seed, 20.0, ppo),
+                 ("SVSL", "3.8", seed, 5.0, 999.0), ("SVSL", "3.8", seed, 30.0, svsl)]
+    rows += [("SVSL", "3.10", 0, 3.0, -7.0)]  # a reward without PPO: no verdict
+    curves = pd.DataFrame(rows, columns=["method", "reward", "seed", "episodes", "return"])
+    out = sr.final_returns(curves.sample(frac=1.0, random_state=0), reps=200)
+    got = out.set_index(["reward", "method"])
+    # IQM of 4 values = mean of the middle two (scipy's 25 % trimmed mean)
+    assert got.loc[("3.8", "PPO"), "iqm"] == pytest.approx(trim_mean([-10, -20, -30, -1000], 0.25))
+    assert got.loc[("3.8", "SVSL"), "iqm"] == pytest.approx(-47.5)
+    assert got.loc[("3.8", "PPO"), "ahead"] == "PPO" and got.loc[("3.8", "PPO"), "as_in_thesis"]
+    assert got.loc[("3.10", "SVSL"), "as_in_thesis"] is None
+    assert got.loc[("3.8", "PPO"), "ci_low"] <= -25.0 <= got.loc[("3.8", "PPO"), "ci_high"]
+    flipped = curves.assign(method=curves["method"].map({"PPO": "SVSL", "SVSL": "PPO"}))
+    verdict = sr.final_returns(flipped, reps=200).set_index(["reward", "method"])
+    assert not verdict.loc[("3.8", "PPO"), "as_in_thesis"]
+    with pytest.raises(ValueError, match="lacks column"):
+        sr.final_returns(curves.drop(columns="seed"))

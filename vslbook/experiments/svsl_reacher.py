@@ -60,6 +60,7 @@ __all__ = [
     "REWARDS",
     "THESIS_OUTCOME",
     "draw_fig_3_5",
+    "final_returns",
     "reacher_configs",
     "reacher_counts",
     "reacher_curves",
@@ -315,6 +316,41 @@ def reacher_curves(
     if not parts:
         return pd.DataFrame(columns=columns)
     return pd.concat(parts, ignore_index=True)[columns]
+
+
+#: Which method Section 3.4.3 reports ahead for each reward.
+THESIS_AHEAD = {"3.8": "PPO", "3.9": "SVSL", "3.10": "SVSL"}
+
+
+def final_returns(curves: pd.DataFrame, reps: int | None = None) -> pd.DataFrame:
+    """Each run's last evaluation, aggregated per (reward, method): IQM with a 95 %
+    stratified-bootstrap CI over the seeds, and whether the method ahead in IQM is the one
+    the thesis reports ahead (``THESIS_AHEAD``). Rewards without both methods get no
+    verdict. Columns: reward, method, runs, iqm, ci_low, ci_high, ahead, as_in_thesis.
+    """
+    from vslbook import stats
+
+    missing = {"method", "reward", "seed", "episodes", "return"} - set(curves.columns)
+    if missing:
+        raise ValueError(f"curves lacks column(s) {sorted(missing)}; use reacher_curves()")
+    last = curves.sort_values("episodes").groupby(["reward", "method", "seed"]).tail(1)
+    rows = []
+    for reward in REWARDS:
+        sub = last[last["reward"].astype(str) == reward]
+        table = {m: sub[sub["method"] == m]["return"].to_numpy()[:, None]
+                 for m in METHODS if (sub["method"] == m).any()}  # fmt: skip
+        if not table:
+            continue
+        point, ci = stats.interval_estimates(table, reps=reps)
+        ahead = max(point, key=lambda m: point[m][0]) if len(table) == len(METHODS) else None
+        for m in table:
+            rows.append({
+                "reward": reward, "method": m, "runs": len(table[m]),
+                "iqm": float(point[m][0]), "ci_low": float(ci[m][0, 0]),
+                "ci_high": float(ci[m][1, 0]), "ahead": ahead,
+                "as_in_thesis": None if ahead is None else ahead == THESIS_AHEAD[reward],
+            })  # fmt: skip
+    return pd.DataFrame(rows)
 
 
 def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Figure:
