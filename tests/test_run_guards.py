@@ -11,13 +11,14 @@ import torch
 
 import vslbook.srl.dime as dime_loop
 from vslbook.experiments.dime_runs import run_variants
-from vslbook.results import RunDir, collect_runs, load_table
+from vslbook.results import DivergenceError, RunDir, collect_runs, load_table
 from vslbook.srl.dime_config import (
     DIMEConfig,
     config_differences,
     describe_differences,
     named_config,
 )
+from vslbook.srl.divergence import WATCHED, FiniteWatch
 from vslbook.stats import iqm_curve
 from vslbook.training import run
 
@@ -205,19 +206,19 @@ def test_dime_runs_import_nothing_they_declare_independent_of(tmp_path):
 
 
 def test_finite_watch_keeps_the_first_non_finite_update():
-    watch = dime_loop.FiniteWatch(("a", "b", "c"), torch.device("cpu"))
+    watch = FiniteWatch(("a", "b", "c"), torch.device("cpu"))
     watch.add(1, a=torch.tensor(1.0), b=torch.tensor(2.0))
     watch.check()  # all finite: nothing to say
     watch.add(2, c=torch.tensor(3.0))
     watch.add(3, a=torch.tensor(0.5), b=torch.tensor(float("-inf")))
     watch.add(4, a=torch.tensor(float("nan")), b=torch.tensor(1.0))  # later: not reported
     watch.add(5, c=torch.tensor(float("nan")))
-    with pytest.raises(dime_loop.DivergenceError) as err:
+    with pytest.raises(DivergenceError) as err:
         watch.check()
     assert (err.value.step, err.value.quantity, err.value.value) == (3, "b", float("-inf"))
     watch.reset()
     watch.add(9, c=torch.tensor(float("nan")))
-    with pytest.raises(dime_loop.DivergenceError, match="step 9: non-finite c"):
+    with pytest.raises(DivergenceError, match="step 9: non-finite c"):
         watch.check()
 
 
@@ -234,7 +235,7 @@ def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
     rng = np.random.default_rng(0)
     for _ in range(64):
         buffer.add(rng.normal(size=3), rng.uniform(-1, 1, 1), 0.1, rng.normal(size=3), False)
-    watch = dime_loop.FiniteWatch(dime_loop._WATCHED, torch.device("cpu"))
+    watch = FiniteWatch(WATCHED, torch.device("cpu"))
     batches = [buffer.sample(16, rng) for _ in range(4)]  # indices drawn on the host
     from vslbook.srl.replay import Batch
     from vslbook.srl.seed_axis import SeedStack
@@ -242,7 +243,7 @@ def test_the_update_loop_never_reads_a_tensor_on_the_host(monkeypatch):
     cpu = torch.device("cpu")
     stack = SeedStack([make_agent(3, 1, cfg, v_min=-1600.0, v_max=100.0, device=cpu)
                        for _ in range(2)])  # fmt: skip
-    seed_watch = dime_loop.FiniteWatch(dime_loop._WATCHED, cpu, seeds=2)
+    seed_watch = FiniteWatch(WATCHED, cpu, seeds=2)
     gens = [torch.Generator().manual_seed(s) for s in (0, 1)]
     noises = [(stack.noise(gens, 16), stack.noise(gens, 16)) for _ in batches]
 

@@ -33,6 +33,7 @@ from vslbook.seeding import seed_everything
 from vslbook.srl import dime
 from vslbook.srl.dime_config import DIMEConfig
 from vslbook.srl.dime_updates import make_agent, resolve_device
+from vslbook.srl.divergence import WATCHED, FiniteWatch
 from vslbook.srl.replay import Batch, ReplayBuffer, replay_generator
 from vslbook.srl.seed_axis import SeedStack
 
@@ -192,7 +193,7 @@ def _train_group(
     next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
     steps_this_call = 0
 
-    watch = dime.FiniteWatch(dime._WATCHED, device, seeds=len(live))  # positions in `live`
+    watch = FiniteWatch(WATCHED, device, seeds=len(live))  # positions in `live`
 
     def drop(errors: dict[int, DivergenceError]) -> None:
         """Mark the seeds at these positions in ``live`` FAILED and stack the others again."""
