@@ -119,7 +119,7 @@
 # |---|---|---|
 # | `00_index` (this page) | 5 s | the same |
 # | `01_tasks` | every task built, a picture of each scene; about 15 s | the same |
-# | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; not yet timed end to end |
+# | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; 10 s from scratch, its three runs included |
 # | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1 (30 of 60 experts), 3.2, 3.3, 3.5 (60 PPO updates), A.1, A.2 at reduced counts, 3 seeds: the run sets took 2 h 7 min of one core (planar reacher 23 min, beer pong 15 min, table tennis 20 min, 5-link reacher 69 min, with another job on the second core), then the notebook 30 s |
 # | `04_diskill` | every check; every Di-SkilL, BBRL, LinDi-SkilL and PPO run set at 2 iterations of 2 experts with 4 samples (PPO: one rollout, 5LR only); about 90 s on a busy machine | Fig. 4.2 / 4.3c at 5 % of the 5LR iterations with its 10 experts, the other tasks at 2 % with at most 5 experts, 3 seeds; many hours estimated from per-iteration times (box pushing is the slowest, about 25 s per iteration of 500 episodes), not yet timed end to end |
 # | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch, from per-run times |
