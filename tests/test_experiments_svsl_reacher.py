@@ -187,3 +187,15 @@ def test_final_returns_take_each_runs_last_evaluation_and_compare_with_the_thesi
     assert not verdict.loc[("3.8", "PPO"), "as_in_thesis"]
     with pytest.raises(ValueError, match="lacks column"):
         sr.final_returns(curves.drop(columns="seed"))
+
+
+def test_fig_3_5_goes_logarithmic_only_where_returns_span_decades() -> None:
+    rows = []
+    for seed in range(3):
+        for ep, (a, b) in enumerate([(-100.0, -400_000.0), (-90.0, -5_000.0), (-80.0, -300.0)]):
+            rows += [("SVSL", "3.8", seed, 10.0 * (ep + 1), a - seed),
+                     ("SVSL", "3.10", seed, 10.0 * (ep + 1), -200.0 - seed),
+                     ("PPO", "3.10", seed, 10.0 * (ep + 1), b - seed)]  # fmt: skip
+    curves = pd.DataFrame(rows, columns=["method", "reward", "seed", "episodes", "return"])
+    fig = sr.draw_fig_3_5(curves, "smoke")
+    assert [ax.get_yscale() for ax in fig.axes[:3]] == ["linear", "linear", "symlog"]

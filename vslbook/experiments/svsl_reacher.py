@@ -370,6 +370,7 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
     fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.2))
     for ax, reward, letter in zip(axes, REWARDS, "abc", strict=True):
         sub = curves[curves["reward"].astype(str) == reward]
+        spans: list[np.ndarray] = []
         for method in METHODS:
             runs = sub[sub["method"] == method]
             if runs.empty:
@@ -378,7 +379,12 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
                 runs, x="episodes", y="return", run="seed", reps=b.bootstrap_reps
             )
             plots.learning_curve(ax, curve, x="episodes", label=method)
+            spans.append(np.abs(curve["iqm"].to_numpy(dtype=float)))
         ax.set_xscale("symlog", linthresh=100)
+        size = np.concatenate(spans) if spans else np.ones(1)
+        size = size[np.isfinite(size) & (size > 0)]
+        if size.size and size.max() > 100 * size.min():  # e.g. Eq. 3.10: PPO's early -4e5
+            ax.set_yscale("symlog", linthresh=1.0)  # against SVSL's -2e2: logarithmic
         ax.set_title(f"({letter}) reward Eq. {reward}")
         ax.set_xlabel("episodes")
         ax.set_ylabel("IQM return (thesis's reward)")
