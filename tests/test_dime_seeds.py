@@ -176,3 +176,20 @@ def test_a_diverged_seed_leaves_the_stack_and_the_others_finish(tmp_path, monkey
         assert ra["critic_updates"] == rb["critic_updates"]
         for key in ("critic_loss", "q_mean", "alpha", "actor_loss", "train_return"):
             assert rb[key] == pytest.approx(ra[key], rel=2e-3, abs=1e-3), key
+
+    def loss_only(self, batch, noise):  # a non-finite loss, the policy unharmed: the episode
+        stats = real(self, batch, noise)  # end (not an action) must catch it
+        calls["n"] += 1
+        if calls["n"] == 7 and self.n_seeds == 3:
+            value = stats.value.clone()
+            value[2] = float("inf")
+            return stats._replace(value=value)
+        return stats
+
+    calls["n"] = 0
+    monkeypatch.setattr(seed_axis.SeedStack, "critic_update", loss_only)
+    with pytest.warns(UserWarning, match="diverged at step 53: non-finite q_mean"):
+        hit = run_seeds("dime", ENV, [7, 8, 9], "smoke", root=tmp_path / "c", overrides=TINY,
+                        progress=False)  # fmt: skip
+    assert [rd.status for rd in hit] == ["done", "done", "failed"]
+    assert not (hit[2].path / "metrics.jsonl").exists()  # dropped before any evaluation
