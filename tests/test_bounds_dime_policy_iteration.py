@@ -18,7 +18,7 @@ from vslbook.bounds import dime as D
 from vslbook.bounds import dime_entropy as E
 from vslbook.bounds import dime_policy_iteration as PI
 from vslbook.bounds import dime_tabular as T
-from vslbook.bounds.foundations import _np
+from vslbook.bounds._helpers import _np
 
 # check names used below
 FIXED_POINT = "T Q^pi = Q^pi: the closed form of Eq. 5.17 (with ℓ) is the backup's fixed point"

@@ -22,15 +22,7 @@ import torch
 from torch import Tensor, nn
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds.foundations import (
-    _count,
-    _linear_gaussian_joint,
-    _np,
-    _positive,
-    _rng,
-    _t,
-    _worst,
-)
+from vslbook.bounds._helpers import _count, _linear_gaussian_joint, _np, _positive, _rng, _t, _worst
 from vslbook.dists import gaussian_kl
 from vslbook.srl.diffusion_policy import (
     DiffusionPolicy,

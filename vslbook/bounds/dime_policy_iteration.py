@@ -21,6 +21,7 @@ import numpy as np
 from scipy.optimize import minimize, minimize_scalar
 
 from vslbook.bounds import Check, CheckReport, relative_tol
+from vslbook.bounds._helpers import _count, _np, _positive, _rng, _worst
 from vslbook.bounds.dime_entropy import (
     _generative_joint,
     _kl,
@@ -28,7 +29,6 @@ from vslbook.bounds.dime_entropy import (
     linear_gaussian_chain,
     linear_gaussian_policy,
 )
-from vslbook.bounds.foundations import _count, _np, _positive, _rng, _worst
 
 __all__ = ["check_diffusion_policy_iteration"]
 

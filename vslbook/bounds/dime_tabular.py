@@ -19,13 +19,9 @@ import numpy as np
 from scipy.special import xlogy
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds.foundations import (
-    _check_distribution,
+from vslbook.bounds._helpers import _check_distribution, _count, _positive, _rng, _worst
+from vslbook.bounds.foundations_maxent import (
     _check_mdp,
-    _count,
-    _positive,
-    _rng,
-    _worst,
     boltzmann_policy,
     maxent_objective,
     random_mdp,

@@ -54,6 +54,7 @@ from collections.abc import Callable
 import numpy as np
 
 from vslbook.bounds import Check, CheckReport
+from vslbook.bounds._helpers import _worst
 from vslbook.bounds.diskill_samples import (
     GatingFn,
     NormaliserFn,
@@ -82,7 +83,6 @@ from vslbook.bounds.diskill_toy import (
     self_normalised_expectation,
     uniform_prior_gating,
 )
-from vslbook.bounds.foundations import _worst
 from vslbook.bounds.svsl import BoundToy, _auxiliary_bounds
 from vslbook.bounds.svsl import _bound_check as svsl_bound_check
 from vslbook.bounds.svsl_toy import (

@@ -22,6 +22,7 @@ import numpy as np
 from scipy.special import log_softmax, softmax
 
 from vslbook.bounds import Check, CheckReport, relative_tol
+from vslbook.bounds._helpers import _worst
 from vslbook.bounds.diskill_toy import (
     _energy_fn,
     _integrate,
@@ -35,7 +36,6 @@ from vslbook.bounds.diskill_toy import (
     self_normalised_expectation,
     uniform_prior_gating,
 )
-from vslbook.bounds.foundations import _worst
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
     _count,

@@ -28,7 +28,7 @@ import numpy as np
 from scipy.special import softmax
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds.foundations import _worst
+from vslbook.bounds._helpers import _worst
 from vslbook.bounds.svsl_decomposition import (
     _brute_force_reps,
     _reps_solution,
