@@ -20,7 +20,6 @@ the REPS update of the weights (:func:`check_reps_weights`).
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -30,8 +29,6 @@ from scipy.special import softmax
 from vslbook.bounds import Check, CheckReport, relative_tol
 from vslbook.bounds._helpers import _worst
 from vslbook.bounds.svsl_decomposition import (
-    _brute_force_reps,
-    _reps_solution,
     context_objective,
     expert_objective,
     reps_categorical,
@@ -39,13 +36,12 @@ from vslbook.bounds.svsl_decomposition import (
     weight_objective,
     weight_rewards,
 )
+from vslbook.bounds.svsl_reps import check_reps_weights
 from vslbook.bounds.svsl_toy import (
     BoundFn,
     ToyMoE,
     ToyProblem,
     _count,
-    _finite,
-    _kl,
     _log_contexts,
     _perturb_context,
     _perturb_expert,
@@ -481,90 +477,6 @@ def check_weight_bound(
     data = dict(report.data)
     data.update(rewards=r, weights_old=old.weights.copy(), weights_softmax=w_soft)
     return CheckReport(report.title, report.checks + extra, data)
-
-
-def check_reps_weights(
-    seed: int = 0,
-    n_components: int = 6,
-    beta: float = 0.5,
-    epsilons: tuple[float, ...] = (0.01, 0.05, 0.2, 0.5, 2.0, 50.0),
-    update: Callable[[np.ndarray, np.ndarray, float, float], np.ndarray] | None = None,
-) -> CheckReport:
-    """REPS update of the weights (Eq. 3.7 with a KL trust region) against brute force.
-
-    For a random categorical ``p_old`` and rewards ``r``: the closed form
-    ``p ∝ p_old^(eta/(eta+beta)) exp(r/(eta+beta))`` (``eta`` from the 1-D dual) attains the
-    optimum of the primal found by SLSQP over the simplex, stays inside ``KL <= eps``, its
-    dual value equals the primal value (strong duality), and for ``eps`` large enough
-    (``eps >= KL(softmax(r/beta) || p_old)``) it *is* ``softmax(r / beta)``, the unconstrained
-    maximiser of Eq. 3.7.
-
-    Args:
-        update: candidate ``(p_old, r, beta, eps) -> p_new``; defaults to
-            :func:`reps_categorical` (its first output).
-
-    Returns:
-        Report with data ``eps_path``, ``kl_path`` (``KL(p_eps || p_old)``) and
-        ``distance_to_softmax`` (``max |p_eps - softmax(r/beta)|``) over a log-spaced range of
-        ``eps``, and ``kl_softmax``.
-    """
-    k = _count("n_components", n_components, 2)
-    beta = _finite("beta", beta, 0.0, strict=True)
-    if not epsilons or any(not (e > 0 and math.isfinite(e)) for e in epsilons):
-        raise ValueError(f"epsilons must be positive finite numbers, got {epsilons!r}")
-    update = update or (lambda p, r, b, e: reps_categorical(p, r, b, e)[0])
-    rng = _rng(seed, 4)
-    p_old = rng.dirichlet(np.full(k, 2.0))
-    r = rng.normal(0.0, 1.0, k)
-    target = softmax(r / beta)
-    kl_soft = _kl(target, p_old)
-    obj_cand, obj_brute, kls, primal, dual = [], [], [], [], []
-    for eps in epsilons:
-        p = np.asarray(update(p_old, r, beta, eps), dtype=float)
-        if p.shape != (k,):
-            raise ValueError(f"update must return shape {(k,)}, got {p.shape}")
-        brute = _brute_force_reps(p_old, r, beta, eps)
-        obj_cand.append(weight_objective(p, r, beta))
-        obj_brute.append(weight_objective(brute, r, beta))
-        kls.append(_kl(p, p_old))
-        _, eta = reps_categorical(p_old, r, beta, eps)
-        dual.append(reps_dual(eta, p_old, r, beta, eps))
-        primal.append(weight_objective(_reps_solution(eta, p_old, r, beta), r, beta))
-    large = [e for e in epsilons if e >= kl_soft]
-    if large:
-        p_large = np.asarray(update(p_old, r, beta, max(large)), dtype=float)
-        softmax_gap = float(np.max(np.abs(p_large - target)))
-    else:
-        softmax_gap = math.nan
-    eps_path = np.geomspace(1e-3, max(10.0, 2 * kl_soft), 20)
-    p_path = np.array([np.asarray(update(p_old, r, beta, e), dtype=float) for e in eps_path])
-    checks = (
-        _worst(
-            "closed form attains the SLSQP optimum of the primal",
-            "Eq. 3.7 (REPS)",
-            obj_cand,
-            obj_brute,
-            1e-7,
-        ),
-        _worst("KL(p_new || p_old) <= eps", "Eq. 3.7 (REPS)", kls, list(epsilons), 1e-9, "<="),
-        _worst("dual value = primal value (strong duality)", "Eq. 3.7 (REPS)", dual, primal, 1e-9),
-        Check(
-            f"eps >= KL(softmax(r/beta) || p_old) = {kl_soft:.3g}: update = softmax(r / beta)",
-            "Eq. 3.7",
-            softmax_gap,
-            0.0,
-            1e-12,
-        ),
-    )
-    data = {
-        "eps_path": eps_path,
-        "kl_path": np.array([_kl(p, p_old) for p in p_path]),
-        "distance_to_softmax": np.max(np.abs(p_path - target), axis=1),
-        "kl_softmax": np.array(kl_soft),
-        "p_old": p_old,
-        "rewards": r,
-    }
-    return CheckReport("REPS update of the expert weights (Section 3.3.3)", checks, data)
 
 
 def svsl_checks(seed: int = 0) -> list[CheckReport]:
