@@ -157,7 +157,7 @@ assert ALGORITHMS and FIGURES, "the registries should not be empty"
 #
 # ```python
 # import vslbook
-# from vslbook.results import paper_curves
+# from vslbook.data import paper_curves
 # from vslbook.stats import iqm_curve
 #
 # curve = iqm_curve(paper_curves("dmc_humanoid_run"))   # the published DIME runs, IQM + 95 % CI

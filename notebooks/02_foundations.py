@@ -231,7 +231,7 @@ vslbook.show_source(train)
 # interquartile mean with a 95 % stratified-bootstrap interval.
 
 # %%
-from vslbook.results import collect_runs, load_table
+from vslbook.data import collect_runs, load_table
 from vslbook.stats import iqm_curve
 from vslbook.training import run
 

@@ -42,9 +42,9 @@ from IPython.display import display
 import vslbook
 from vslbook.bounds import dime as D
 from vslbook.budget import get_budget
+from vslbook.data import paper_curves
 from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
 from vslbook.plots import learning_curve, method_color, save_figure, thesis_vs_ours, use_style
-from vslbook.results import paper_curves
 from vslbook.srl.dime_config import DIMEConfig, describe_differences, named_config
 from vslbook.stats import iqm_curve
 

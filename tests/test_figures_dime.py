@@ -12,12 +12,12 @@ import pytest  # noqa: E402
 
 from vslbook.budget import BUDGETS  # noqa: E402
 from vslbook.cli import main  # noqa: E402
+from vslbook.data import paper_curves  # noqa: E402
 from vslbook.figures import (  # noqa: E402
     draw_fig_5_2_published,
     draw_fig_5_3_published,
 )
 from vslbook.registry import FIGURES, load_plugins  # noqa: E402
-from vslbook.results import paper_curves  # noqa: E402
 from vslbook.stats import iqm_curve  # noqa: E402
 
 SMOKE = BUDGETS["smoke"]  # 200 bootstrap resamples: fast

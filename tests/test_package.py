@@ -2,7 +2,7 @@ import pytest
 
 import vslbook
 from vslbook.cli import main
-from vslbook.results import paper_curves
+from vslbook.data import paper_curves
 from vslbook.stats import iqm_curve
 
 

@@ -10,8 +10,10 @@ import pandas as pd
 import pytest
 import torch
 
+from vslbook import data as results_data
 from vslbook import results
-from vslbook.results import DataIntegrityError, RunDir
+from vslbook.data import DataIntegrityError
+from vslbook.results import RunDir
 
 CONFIG = {"algo": "dime", "env": "dmc_cheetah_run", "seed": 3, "lr": 3e-4, "budget": "smoke"}
 
@@ -184,15 +186,15 @@ def _make_runs(root):
 
 def test_collect_runs_schema_and_determinism(tmp_path):
     runs = _make_runs(tmp_path / "runs")
-    first = results.collect_runs([r.path for r in runs], tmp_path / "a")
-    second = results.collect_runs(list(reversed(runs)), tmp_path / "b")
+    first = results_data.collect_runs([r.path for r in runs], tmp_path / "a")
+    second = results_data.collect_runs(list(reversed(runs)), tmp_path / "b")
     for name in ("runs.csv", "evals.csv.gz", "registry.json"):
         assert first[name].read_bytes() == second[name].read_bytes(), name
-    table = results.load_table("runs.csv", tmp_path / "a")
+    table = results_data.load_table("runs.csv", tmp_path / "a")
     assert list(table.columns) == ["run", "algo", "env", "seed", "budget", "config_hash", "status"]
     assert list(table["status"]) == ["done", "incomplete"]
     assert list(table["seed"]) == [0, 1]
-    evals = results.load_table("evals.csv.gz", tmp_path / "a")
+    evals = results_data.load_table("evals.csv.gz", tmp_path / "a")
     assert list(evals.columns) == ["run", "step", "metric", "value"]
     assert len(evals) == 6 and set(evals["metric"]) == {"ret", "loss"}
     registry = json.loads(first["registry.json"].read_text())
@@ -201,32 +203,32 @@ def test_collect_runs_schema_and_determinism(tmp_path):
 
 def test_load_table_default_directory(tmp_path, monkeypatch):
     monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
-    assert results.data_dir() == tmp_path / "data"
-    results.collect_runs(_make_runs(tmp_path / "runs"), tmp_path / "data" / "results")
-    assert len(results.load_table("runs.csv")) == 2
+    assert results_data.data_dir() == tmp_path / "data"
+    results_data.collect_runs(_make_runs(tmp_path / "runs"), tmp_path / "data" / "results")
+    assert len(results_data.load_table("runs.csv")) == 2
 
 
 def test_load_table_detects_one_byte_corruption(tmp_path):
-    out = results.collect_runs(_make_runs(tmp_path / "runs"), tmp_path / "out")
+    out = results_data.collect_runs(_make_runs(tmp_path / "runs"), tmp_path / "out")
     path = out["runs.csv"]
     data = bytearray(path.read_bytes())
     data[-3] ^= 0x01
     path.write_bytes(bytes(data))
     with pytest.raises(DataIntegrityError, match=r"runs.csv.*sha256 does not match.*expected"):
-        results.load_table("runs.csv", tmp_path / "out")
+        results_data.load_table("runs.csv", tmp_path / "out")
     with pytest.raises(DataIntegrityError):
-        results.verify_file(path)
+        results_data.verify_file(path)
 
 
 def test_load_table_missing_registry_or_entry(tmp_path):
     pd.DataFrame({"a": [1, 2]}).to_csv(tmp_path / "extra.csv", index=False)
     with pytest.raises(DataIntegrityError, match="no registry.json"):
-        results.load_table("extra.csv", tmp_path)
-    results.register_file(tmp_path / "extra.csv", "two numbers")
+        results_data.load_table("extra.csv", tmp_path)
+    results_data.register_file(tmp_path / "extra.csv", "two numbers")
     pd.DataFrame({"b": [3]}).to_csv(tmp_path / "other.csv", index=False)
     with pytest.raises(DataIntegrityError, match="other.csv is not listed.*extra.csv"):
-        results.load_table("other.csv", tmp_path)
-    assert results.load_table("extra.csv", tmp_path)["a"].tolist() == [1, 2]
+        results_data.load_table("other.csv", tmp_path)
+    assert results_data.load_table("extra.csv", tmp_path)["a"].tolist() == [1, 2]
 
 
 # --------------------------------------------------------------------------- paper data
@@ -234,16 +236,16 @@ def test_load_table_missing_registry_or_entry(tmp_path):
 
 def test_paper_curves_has_21_tasks_with_10_seeds(monkeypatch):
     monkeypatch.delenv("VSLBOOK_DATA", raising=False)
-    frame = results.paper_curves()
+    frame = results_data.paper_curves()
     assert list(frame.columns) == ["env", "seed", "env_steps", "mean_return"]
     seeds = frame.groupby("env")["seed"].nunique()
     assert len(seeds) == 21 and (seeds == 10).all()
-    assert results.paper_tasks() == sorted(seeds.index)
-    dog = results.paper_curves("dmc_dog_run")
+    assert results_data.paper_tasks() == sorted(seeds.index)
+    dog = results_data.paper_curves("dmc_dog_run")
     assert set(dog["env"]) == {"dmc_dog_run"} and dog["env_steps"].max() == 3_000_000
 
 
 def test_paper_curves_rejects_unknown_task(monkeypatch):
     monkeypatch.delenv("VSLBOOK_DATA", raising=False)
     with pytest.raises(ValueError, match=r"unknown task 'dmc_cat_run'.*dmc_acrobot.*gym_ant_v3"):
-        results.paper_curves("dmc_cat_run")
+        results_data.paper_curves("dmc_cat_run")

@@ -16,10 +16,10 @@ from matplotlib.lines import Line2D
 from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator
 
 from vslbook.budget import Budget, get_budget
+from vslbook.data import paper_curves, paper_tasks
 from vslbook.movement import DMP, ProDMP, ProMP
 from vslbook.plots import learning_curve, method_color, save_figure, use_style
 from vslbook.registry import register_figure
-from vslbook.results import paper_curves, paper_tasks
 from vslbook.stats import iqm_curve
 
 

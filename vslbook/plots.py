@@ -2,12 +2,12 @@
 
 Usage in a notebook::
 
-    from vslbook import plots, results, stats
+    from vslbook import data, plots, stats
 
     plots.use_style()                       # for the rest of the session, or
     with plots.use_style():                 # only inside the block
         fig, ax = plt.subplots()
-        thesis = stats.iqm_curve(results.paper_curves("dmc_cheetah_run"))
+        thesis = stats.iqm_curve(data.paper_curves("dmc_cheetah_run"))
         plots.thesis_vs_ours(ax, thesis, ours)
         plots.save_figure(fig, "fig5-3-cheetah_run")
 

@@ -1,4 +1,4 @@
-"""Run directories, the ``data/`` schema, and the paper's published curves.
+"""Run directories: one training run's configuration, metrics, checkpoints and status.
 
 A *run directory* holds everything one training run leaves behind::
 
@@ -21,74 +21,40 @@ rows logged between the checkpoint and an interruption are not duplicated when t
 continues from the checkpoint. Together with :func:`rng_state` / :func:`restore_rng_state`
 stored in the checkpoint, a resumed run reproduces the numbers of an uninterrupted one.
 
-Tables in ``data/``: :func:`collect_runs` turns run directories into ``runs.csv`` (one row
-per run) and ``evals.csv.gz`` (long format: run, step, metric, value). Every table sits
-next to a ``registry.json`` that records its sha256, row count and a description;
-:func:`load_table` refuses to read a file whose bytes do not match the registry.
+The ``data/`` tables are :mod:`vslbook.data`; code identity is :mod:`vslbook.provenance`.
 """
 
 from __future__ import annotations
 
-import functools
-import gzip
 import hashlib
-import io
 import json
 import math
 import numbers
 import os
-import platform
 import random
 import re
-import socket
-import subprocess
-import sys
-from collections.abc import Iterable, Mapping
+from collections.abc import Mapping
 from dataclasses import asdict, is_dataclass
-from datetime import UTC, datetime
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import pandas as pd
 
+from vslbook.provenance import NOT_RUN_CODE, code_fingerprint
+from vslbook.provenance import environment as _environment
+
 __all__ = [
-    "DataIntegrityError",
+    "NOT_RUN_CODE",
     "DivergenceError",
     "RunDir",
-    "collect_runs",
-    "config_hash",
-    "data_dir",
-    "load_table",
-    "paper_curves",
-    "paper_tasks",
     "code_fingerprint",
-    "register_file",
+    "config_hash",
     "restore_rng_state",
-    "results_dir",
     "rng_state",
-    "verify_file",
 ]
 
-DATA_ENV_VAR = "VSLBOOK_DATA"
-REGISTRY = "registry.json"
-PAPER_CURVES = "dime_learning_curves.csv"
-#: distributions whose versions go into ``env.json`` (import name -> distribution name)
-TRACKED_PACKAGES = {
-    "vslbook": "vslbook",
-    "torch": "torch",
-    "numpy": "numpy",
-    "gymnasium": "gymnasium",
-    "mujoco": "mujoco",
-    "dm_control": "dm-control",
-}
-_REPO_ROOT = Path(__file__).resolve().parents[1]
 _NAME_OK = re.compile(r"[^A-Za-z0-9._-]+")
-
-
-class DataIntegrityError(ValueError):
-    """A data file does not match its entry in ``registry.json`` (or has none)."""
 
 
 class DivergenceError(RuntimeError):
@@ -104,22 +70,6 @@ class DivergenceError(RuntimeError):
         self.step, self.quantity, self.value = int(step), str(quantity), value
         shown = "" if value is None else f" ({value})"
         super().__init__(f"diverged at step {self.step}: non-finite {self.quantity}{shown}")
-
-
-# --------------------------------------------------------------------------- paths
-
-
-def data_dir() -> Path:
-    """The data folder: ``$VSLBOOK_DATA`` if set, else the repository's ``data/``."""
-    env = os.environ.get(DATA_ENV_VAR)
-    if env:
-        return Path(env).expanduser()
-    return _REPO_ROOT / "data"
-
-
-def results_dir() -> Path:
-    """Where :func:`collect_runs` output is read from by default: ``data_dir()/results``."""
-    return data_dir() / "results"
 
 
 # --------------------------------------------------------------------------- JSON helpers
@@ -198,92 +148,6 @@ def _metric_value(key: str, value: Any) -> Any:
         f"metric {key!r}: expected an int, float, str, bool or None, "
         f"got {value!r} of type {type(value).__name__}"
     )
-
-
-# --------------------------------------------------------------------------- environment
-
-
-def _git_sha() -> str | None:
-    try:
-        out = subprocess.run(
-            ["git", "rev-parse", "HEAD"],
-            cwd=_REPO_ROOT,
-            capture_output=True,
-            text=True,
-            timeout=5,
-            check=False,
-        )
-    except (OSError, subprocess.SubprocessError):
-        return None
-    sha = out.stdout.strip()
-    return sha if out.returncode == 0 and re.fullmatch(r"[0-9a-f]{40}", sha) else None
-
-
-def _git_dirty() -> bool | None:
-    """True when the work tree has uncommitted changes (None outside a git checkout)."""
-    try:
-        out = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no"],
-            cwd=_REPO_ROOT, capture_output=True, text=True, timeout=5, check=False,
-        )  # fmt: skip
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return bool(out.stdout.strip()) if out.returncode == 0 else None
-
-
-#: Package paths no training run reads: analysis, figures and the notebooks' numerical checks.
-#: Editing them never makes a run stale (:func:`code_fingerprint`).
-NOT_RUN_CODE: tuple[str, ...] = (
-    "bounds/", "experiments/", "figures.py", "plots.py", "stats.py",
-)  # fmt: skip
-
-
-def code_fingerprint(exclude: tuple[str, ...] | list[str] = ()) -> str:
-    """sha256 over the package's Python sources (relative path and bytes of each file).
-
-    It names the code that produced a run independently of git: an uncommitted edit
-    changes it, a commit that touches only notebooks or docs does not. Files under
-    :data:`NOT_RUN_CODE` and under ``exclude`` (package-relative prefixes such as
-    ``"erl/"``: code an algorithm's runs cannot reach, declared by the algorithm's registry
-    entry) are left out, so adding Chapter 3 code does not make Chapter 5 runs stale.
-    Computed once per process and scope, so it names the code this process loaded, even if
-    files change on disk later.
-    """
-    return _fingerprint(tuple(sorted(set(NOT_RUN_CODE) | set(exclude))))
-
-
-@functools.lru_cache(maxsize=16)
-def _fingerprint(skip: tuple[str, ...]) -> str:
-    package = Path(__file__).resolve().parent
-    digest = hashlib.sha256()
-    for path in sorted(package.rglob("*.py")):
-        rel = path.relative_to(package).as_posix()
-        if rel.startswith(skip):
-            continue
-        digest.update(rel.encode("utf-8") + b"\0")
-        digest.update(path.read_bytes() + b"\0")
-    return digest.hexdigest()
-
-
-def _environment(code_exclude: tuple[str, ...] = ()) -> dict[str, Any]:
-    """What ``env.json`` records: where and with what a run was started."""
-    versions: dict[str, str | None] = {}
-    for name, dist in TRACKED_PACKAGES.items():
-        try:
-            versions[name] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            versions[name] = None
-    return {
-        "python": sys.version.split()[0],
-        "platform": platform.platform(),
-        "hostname": socket.gethostname(),
-        "packages": versions,
-        "git_sha": _git_sha(),
-        "git_dirty": _git_dirty(),
-        "code_hash": code_fingerprint(code_exclude),
-        "code_excluded": sorted(code_exclude),
-        "timestamp": datetime.now(UTC).isoformat(timespec="seconds"),
-    }
 
 
 # --------------------------------------------------------------------------- run directory
@@ -657,220 +521,3 @@ def restore_rng_state(
     torch.set_rng_state(state["torch"])
     if state.get("torch_cuda") is not None and torch.cuda.is_available():
         torch.cuda.set_rng_state_all(state["torch_cuda"])
-
-
-# --------------------------------------------------------------------------- registry
-
-
-def _sha256(data: bytes) -> str:
-    return hashlib.sha256(data).hexdigest()
-
-
-def _count_rows(path: Path, data: bytes) -> int | None:
-    """Data rows of a CSV (plain or gzip), None for other files."""
-    name = path.name.lower()
-    if name.endswith(".csv"):
-        return len(pd.read_csv(io.BytesIO(data)))
-    if name.endswith(".csv.gz"):
-        return len(pd.read_csv(io.BytesIO(data), compression="gzip"))
-    return None
-
-
-def _read_registry(directory: Path) -> dict[str, Any]:
-    path = directory / REGISTRY
-    if not path.exists():
-        return {}
-    try:
-        registry = json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as err:
-        raise DataIntegrityError(f"{path} is not valid JSON: {err.msg}") from err
-    if not isinstance(registry, dict):
-        raise DataIntegrityError(f"{path} must hold a JSON object, got {type(registry).__name__}")
-    return registry
-
-
-def register_file(path: str | os.PathLike[str], description: str) -> dict[str, Any]:
-    """Record ``path``'s sha256, row count and ``description`` in its folder's registry.json.
-
-    Returns the entry that was written.
-    """
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"cannot register {path}: no such file")
-    if not description or not isinstance(description, str):
-        raise ValueError(f"description must be a non-empty string, got {description!r}")
-    data = path.read_bytes()
-    entry = {"sha256": _sha256(data), "rows": _count_rows(path, data), "description": description}
-    registry = _read_registry(path.parent)
-    registry[path.name] = entry
-    _atomic_write(path.parent / REGISTRY, _json_bytes(registry))
-    return entry
-
-
-def _verified_bytes(path: Path) -> bytes:
-    registry_path = path.parent / REGISTRY
-    if not registry_path.exists():
-        raise DataIntegrityError(
-            f"cannot verify {path}: no {REGISTRY} in {path.parent} (expected one that "
-            f"records its sha256; create it with vslbook.results.register_file)"
-        )
-    registry = _read_registry(path.parent)
-    if path.name not in registry:
-        raise DataIntegrityError(
-            f"{path.name} is not listed in {registry_path}; registered files: "
-            f"{', '.join(sorted(registry)) or 'none'}"
-        )
-    if not path.is_file():
-        raise FileNotFoundError(
-            f"{path} is registered in {registry_path} but the file is missing"
-        )
-    data = path.read_bytes()
-    expected = registry[path.name].get("sha256")
-    actual = _sha256(data)
-    if actual != expected:
-        raise DataIntegrityError(
-            f"{path}: sha256 does not match the registry {registry_path} "
-            f"(expected {expected}, got {actual}); the file is corrupted or was edited"
-        )
-    return data
-
-
-def verify_file(path: str | os.PathLike[str]) -> str:
-    """Check ``path`` against the registry.json next to it; return its sha256.
-
-    Raises:
-        DataIntegrityError: no registry, no entry for the file, or a different sha256.
-        FileNotFoundError: the file itself is missing.
-    """
-    return _sha256(_verified_bytes(Path(path)))
-
-
-def load_table(name: str, directory: str | os.PathLike[str] | None = None) -> pd.DataFrame:
-    """Read a registered CSV table (``.csv`` or ``.csv.gz``) after verifying its sha256.
-
-    Args:
-        name: file name inside ``directory``, e.g. ``"runs.csv"`` or ``"evals.csv.gz"``.
-        directory: folder holding the file and its ``registry.json``; default
-            :func:`results_dir`.
-
-    Raises:
-        DataIntegrityError: see :func:`verify_file`.
-    """
-    path = Path(directory) / name if directory is not None else results_dir() / name
-    if not path.name.lower().endswith((".csv", ".csv.gz")):
-        raise ValueError(f"load_table reads .csv or .csv.gz files, got {name!r}")
-    data = _verified_bytes(path)
-    compression = "gzip" if path.name.lower().endswith(".gz") else None
-    return pd.read_csv(io.BytesIO(data), compression=compression)
-
-
-# --------------------------------------------------------------------------- collecting runs
-
-
-RUNS_COLUMNS = ["run", "algo", "env", "seed", "budget", "config_hash", "status"]
-EVALS_COLUMNS = ["run", "step", "metric", "value"]
-
-
-def _is_numeric(value: Any) -> bool:
-    return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
-
-
-def _csv_bytes(frame: pd.DataFrame) -> bytes:
-    return frame.to_csv(index=False, lineterminator="\n").encode("utf-8")
-
-
-def _gzip_bytes(data: bytes) -> bytes:
-    """gzip with a fixed header (no file name, mtime 0): same input, same bytes."""
-    buffer = io.BytesIO()
-    with gzip.GzipFile(filename="", mode="wb", fileobj=buffer, mtime=0, compresslevel=9) as gz:
-        gz.write(data)
-    return buffer.getvalue()
-
-
-def collect_runs(
-    run_dirs: Iterable[str | os.PathLike[str] | RunDir], out_dir: str | os.PathLike[str]
-) -> dict[str, Path]:
-    """Write ``runs.csv``, ``evals.csv.gz`` and ``registry.json`` into ``out_dir``.
-
-    ``runs.csv`` has one row per run (columns run, algo, env, seed, budget, config_hash,
-    status ``done``, ``failed`` or ``incomplete``), sorted by run name; ``evals.csv.gz``
-    has one row per (run, step, metric) for every numeric metric in ``metrics.jsonl``
-    (``null`` values, i.e. non-finite ones, become empty cells / NaN). The output is
-    byte-for-byte deterministic for the same runs.
-
-    Returns:
-        The written paths keyed by file name.
-    """
-    runs = [r if isinstance(r, RunDir) else RunDir.open(r) for r in run_dirs]
-    by_name: dict[str, RunDir] = {}
-    for run in runs:
-        if run.name in by_name:
-            raise ValueError(
-                f"two run directories share the name {run.name!r}: "
-                f"{by_name[run.name].path} and {run.path}"
-            )
-        by_name[run.name] = run
-    run_rows, eval_rows = [], []
-    for name in sorted(by_name):
-        run = by_name[name]
-        config = run.config
-        run_rows.append(
-            {
-                "run": name,
-                "algo": config.get("algo"),
-                "env": config.get("env"),
-                "seed": config.get("seed"),
-                "budget": config.get("budget"),
-                "config_hash": config_hash(config),
-                "status": run.status,
-            }
-        )
-        for row in run.metrics():
-            for metric in sorted(k for k in row if k != "step"):
-                if _is_numeric(row[metric]):
-                    value = np.nan if row[metric] is None else row[metric]
-                    eval_rows.append((name, row["step"], metric, value))
-    runs_frame = pd.DataFrame(run_rows, columns=RUNS_COLUMNS)
-    runs_frame["seed"] = runs_frame["seed"].astype("Int64")
-    evals_frame = pd.DataFrame(eval_rows, columns=EVALS_COLUMNS).astype({"value": "float64"})
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    written = {"runs.csv": out / "runs.csv", "evals.csv.gz": out / "evals.csv.gz"}
-    _atomic_write(written["runs.csv"], _csv_bytes(runs_frame))
-    _atomic_write(written["evals.csv.gz"], _gzip_bytes(_csv_bytes(evals_frame)))
-    register_file(written["runs.csv"], "one row per run: run, algo, env, seed, budget, "
-                  "config_hash, status (done | failed | incomplete); written by vslbook.results")
-    register_file(written["evals.csv.gz"], "long-format evaluations: run, step, metric, "
-                  "value; from each run's metrics.jsonl; written by vslbook.results")
-    written[REGISTRY] = out / REGISTRY
-    return written
-
-
-# --------------------------------------------------------------------------- paper data
-
-
-def paper_curves(task: str | None = None) -> pd.DataFrame:
-    """DIME's published learning curves (``data/paper/dime_learning_curves.csv``).
-
-    Columns ``env, seed, env_steps, mean_return``; 21 tasks with 10 seeds each (see
-    ``data/paper/README.md`` for provenance). The file is checked against
-    ``data/paper/registry.json`` before reading.
-
-    Args:
-        task: one task id (e.g. ``"dmc_dog_run"``) to keep, or None for all tasks.
-
-    Raises:
-        ValueError: ``task`` is not one of the published task ids (they are listed).
-    """
-    frame = load_table(PAPER_CURVES, data_dir() / "paper")
-    if task is None:
-        return frame
-    valid = sorted(frame["env"].unique())
-    if task not in valid:
-        raise ValueError(f"unknown task {task!r}; expected one of: {', '.join(valid)}")
-    return frame[frame["env"] == task].reset_index(drop=True)
-
-
-def paper_tasks() -> list[str]:
-    """The task ids in the published DIME curves, sorted."""
-    return sorted(paper_curves()["env"].unique().tolist())

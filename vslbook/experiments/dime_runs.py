@@ -21,8 +21,9 @@ from typing import Any
 import pandas as pd
 
 from vslbook.budget import Budget, get_budget
+from vslbook.data import collect_runs, load_table
 from vslbook.registry import get_algorithm
-from vslbook.results import RunDir, collect_runs, load_table
+from vslbook.results import RunDir
 from vslbook.srl.dime_config import describe_differences, named_config
 from vslbook.training import run, run_seeds
 
@@ -115,7 +116,7 @@ def run_variants(
     (:func:`vslbook.training.run_seeds`; the same run directories as one seed at a time).
 
     ``common`` (e.g. a named configuration plus run lengths) is applied first, then each
-    variant's overrides. The metrics are written by :func:`vslbook.results.collect_runs` to
+    variant's overrides. The metrics are written by :func:`vslbook.data.collect_runs` to
     ``tables`` and read back through its sha256 check, so the returned table is exactly what
     a later analysis would load. Finished runs made by the same code are reused, interrupted
     ones resume, stale ones are re-run unless ``reuse_stale`` (see

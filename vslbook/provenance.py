@@ -1,0 +1,116 @@
+"""Where and with what code a run was made: git sha, dirty flag, code fingerprint, versions.
+
+:func:`code_fingerprint` names the code that produced a run independently of git; it is
+what :attr:`vslbook.results.RunDir.code_matches` compares, so a finished run is reused only
+by the code that made it. ``env.json`` records :func:`environment` next to it.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import platform
+import re
+import socket
+import subprocess
+import sys
+from datetime import UTC, datetime
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+__all__ = ["NOT_RUN_CODE", "TRACKED_PACKAGES", "code_fingerprint", "environment"]
+
+#: distributions whose versions go into ``env.json`` (import name -> distribution name)
+TRACKED_PACKAGES = {
+    "vslbook": "vslbook",
+    "torch": "torch",
+    "numpy": "numpy",
+    "gymnasium": "gymnasium",
+    "mujoco": "mujoco",
+    "dm_control": "dm-control",
+}
+_REPO_ROOT = Path(__file__).resolve().parents[1]
+
+
+def _git_sha() -> str | None:
+    try:
+        out = subprocess.run(
+            ["git", "rev-parse", "HEAD"],
+            cwd=_REPO_ROOT,
+            capture_output=True,
+            text=True,
+            timeout=5,
+            check=False,
+        )
+    except (OSError, subprocess.SubprocessError):
+        return None
+    sha = out.stdout.strip()
+    return sha if out.returncode == 0 and re.fullmatch(r"[0-9a-f]{40}", sha) else None
+
+
+def _git_dirty() -> bool | None:
+    """True when the work tree has uncommitted changes (None outside a git checkout)."""
+    try:
+        out = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no"],
+            cwd=_REPO_ROOT, capture_output=True, text=True, timeout=5, check=False,
+        )  # fmt: skip
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return bool(out.stdout.strip()) if out.returncode == 0 else None
+
+
+#: Package paths no training run reads: analysis, figures and the notebooks' numerical checks.
+#: Editing them never makes a run stale (:func:`code_fingerprint`).
+NOT_RUN_CODE: tuple[str, ...] = (
+    "bounds/", "data.py", "experiments/", "figures.py", "plots.py", "stats.py",
+)  # fmt: skip
+
+
+def code_fingerprint(exclude: tuple[str, ...] | list[str] = ()) -> str:
+    """sha256 over the package's Python sources (relative path and bytes of each file).
+
+    It names the code that produced a run independently of git: an uncommitted edit
+    changes it, a commit that touches only notebooks or docs does not. Files under
+    :data:`NOT_RUN_CODE` and under ``exclude`` (package-relative prefixes such as
+    ``"erl/"``: code an algorithm's runs cannot reach, declared by the algorithm's registry
+    entry) are left out, so adding Chapter 3 code does not make Chapter 5 runs stale.
+    Computed once per process and scope, so it names the code this process loaded, even if
+    files change on disk later.
+    """
+    return _fingerprint(tuple(sorted(set(NOT_RUN_CODE) | set(exclude))))
+
+
+@functools.lru_cache(maxsize=16)
+def _fingerprint(skip: tuple[str, ...]) -> str:
+    package = Path(__file__).resolve().parent
+    digest = hashlib.sha256()
+    for path in sorted(package.rglob("*.py")):
+        rel = path.relative_to(package).as_posix()
+        if rel.startswith(skip):
+            continue
+        digest.update(rel.encode("utf-8") + b"\0")
+        digest.update(path.read_bytes() + b"\0")
+    return digest.hexdigest()
+
+
+def environment(code_exclude: tuple[str, ...] = ()) -> dict[str, Any]:
+    """What ``env.json`` records: where and with what a run was started."""
+    versions: dict[str, str | None] = {}
+    for name, dist in TRACKED_PACKAGES.items():
+        try:
+            versions[name] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[name] = None
+    return {
+        "python": sys.version.split()[0],
+        "platform": platform.platform(),
+        "hostname": socket.gethostname(),
+        "packages": versions,
+        "git_sha": _git_sha(),
+        "git_dirty": _git_dirty(),
+        "code_hash": code_fingerprint(code_exclude),
+        "code_excluded": sorted(code_exclude),
+        "timestamp": datetime.now(UTC).isoformat(timespec="seconds"),
+    }
