@@ -20,7 +20,7 @@ from vslbook.experiments import diskill_runs as D
 def test_counts_scale_only_counts():
     full, red, smoke = (D.counts("reacher5", "diskill", b) for b in ("full", "reduced", "smoke"))
     assert full == {"seeds": 24, "iterations": 3000, "test_every": 5, "test_contexts": 75}
-    assert red["iterations"] == 150 and red["seeds"] == 3
+    assert red["iterations"] == 300 and red["seeds"] == 3
     assert smoke["n_experts"] == 2 and smoke["samples_per_expert"] == 4
     assert D.counts("hopper-jump", "bbrl", "reduced")["iterations"] == 28
     bpo = D.counts("box-pushing-obstacle", "diskill", "reduced")
@@ -56,6 +56,27 @@ def test_run_set_and_curves(reacher_runs):
     bbrl = curves[curves["method"] == "BBRL"]["samples"].max()
     dis = curves[curves["method"] == "Di-SkilL"]["samples"].max()
     assert bbrl == 2 * 4 and dis == 2 * 2 * 4
+
+
+def test_final_scores_and_the_thesis_pairs(reacher_runs):
+    import json
+
+    last = {m: json.loads(
+                [line for line in (paths[0] / "metrics.jsonl").read_text().splitlines()
+                 if "test_return" in line][-1])["test_return"]
+            for m, paths in reacher_runs.items()}  # fmt: skip
+    scores, verdicts = D.final_scores("4.3c", reacher_runs, reps=50)
+    assert list(scores["runs"]) == [1, 1, 1]  # one seed each: the IQM is that run's value
+    np.testing.assert_allclose(scores.set_index("method")["iqm"][list(last)], list(last.values()))
+    # PPO did not run: its pair is left out; the other two compare the last evaluations
+    assert list(zip(verdicts["ahead"], verdicts["behind"], strict=True)) == [
+        ("Di-SkilL", "BBRL"), ("Di-SkilL", "LinDi-SkilL")]  # fmt: skip
+    assert list(verdicts["as_in_thesis"]) == [last["diskill"] > last["bbrl"],
+                                              last["diskill"] > last["lindiskill"]]  # fmt: skip
+    with pytest.raises(ValueError, match="unknown figure '4.9'"):
+        D.final_scores("4.9", reacher_runs)
+    with pytest.raises(ValueError, match="unknown method"):
+        D.final_scores("4.3c", {"sac": reacher_runs["bbrl"]})
 
 
 def test_fig_4_2_analysis(reacher_runs):
@@ -105,6 +126,12 @@ def test_ppo_ch4_from_the_command_line(tmp_path, monkeypatch):
     red = ppo_defaults("vslbook/BoxPushingObstacleStep-v0", get_budget("reduced"), {})
     # Di-SkilL at reduced on box pushing: 90 iterations x 5 experts x 50 episodes of 100 steps
     assert red.total_steps == -(-90 * 5 * 50 * 100 // 16384) * 16384
+    # 5LR at reduced: Di-SkilL's 300 x 250 episodes of 200 steps (15M) exceed the budget's
+    # 5 % of the full run (0.05 x 9156 rollouts = 457.8), so PPO gets 458 rollouts.
+    red_5lr = ppo_defaults("vslbook/Reacher5SparseStep-v0", get_budget("reduced"), {})
+    assert red_5lr.total_steps == 458 * 16384 < 300 * 250 * 200
+    with pytest.raises(ValueError, match="not on 'hopper-jump'"):
+        D.ppo_steps("hopper-jump", "reduced")
     monkeypatch.setenv("VSLBOOK_WORKERS", "1")
     path = D.ppo_run("reacher5", 0, "smoke", tmp_path)
     rows = RunDir.open(path).metrics()
