@@ -398,7 +398,7 @@ planar_runs = {v: [] for v in P.VARIANTS}
 t0 = time.perf_counter()
 for variant in P.VARIANTS:
     for seed in range(counts["seeds"]):
-        planar_runs[variant].append(P.run_planar(variant, seed, root, budget))
+        planar_runs[variant].append(P.run_planar(variant, seed, root, budget, progress=True))
 print(f"{sum(map(len, planar_runs.values()))} runs ready in {time.perf_counter() - t0:.0f} s")
 models = {v: [P.load_model(p) for p in paths] for v, paths in planar_runs.items()}
 
@@ -497,7 +497,7 @@ from vslbook.experiments import svsl_beer_pong as BP
 bp_counts = BP.beer_pong_counts(budget)
 print("counts at this budget:", bp_counts)
 t0 = time.perf_counter()
-bp_runs = {m: [BP.run_beer_pong(m, s, root, budget) for s in range(bp_counts["seeds"])]
+bp_runs = {m: [BP.run_beer_pong(m, s, root, budget, progress=True) for s in range(bp_counts["seeds"])]
            for m in BP.METHODS}  # fmt: skip
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
@@ -550,7 +550,7 @@ plt.show()
 from vslbook.experiments import svsl_reacher as RE
 
 t0 = time.perf_counter()
-reacher_runs = RE.reacher_runs(root, budget)
+reacher_runs = RE.reacher_runs(root, budget, progress=True)
 print(f"reacher runs ready in {time.perf_counter() - t0:.0f} s")
 reacher_curves = RE.reacher_curves(reacher_runs)
 fig = RE.draw_fig_3_5(reacher_curves, budget)
@@ -592,7 +592,7 @@ from vslbook.experiments import svsl_table_tennis as TT
 tt_counts = TT.table_tennis_counts(budget)
 print("counts at this budget:", tt_counts)
 t0 = time.perf_counter()
-tt_runs = TT.run_all(root, budget)
+tt_runs = TT.run_all(root, budget, progress=True)
 print(f"table tennis runs ready in {time.perf_counter() - t0:.0f} s")
 tt_svsl = TT.load_model(tt_runs["SVSL"][0])
 fig, axes = plt.subplots(1, 4, figsize=(17, 4))

@@ -1117,7 +1117,7 @@ c5 = DR.counts("reacher5", "diskill", budget)
 print("5LR counts at this budget:", c5)
 t0 = time.perf_counter()
 runs_5lr = DR.run_set("4.3c", budget, root, progress=True)
-ppo_5lr = [DR.ppo_run("reacher5", s, budget, root) for s in range(c5["seeds"])]
+ppo_5lr = [DR.ppo_run("reacher5", s, budget, root, progress=True) for s in range(c5["seeds"])]
 print(f"5LR runs ready in {time.perf_counter() - t0:.0f} s")
 
 model = DR.load_model(runs_5lr["diskill"][0])
@@ -1181,11 +1181,11 @@ t0 = time.perf_counter()
 finals = {}
 for ax, figure in zip(axes, THESIS_4, strict=True):
     task = DR.FIGURES[figure][0]
-    runs = runs_5lr if figure == "4.3c" else DR.run_set(figure, budget, root)
+    runs = runs_5lr if figure == "4.3c" else DR.run_set(figure, budget, root, progress=True)
     if figure == "4.3c":
         runs = runs | {"ppo": ppo_5lr}
     elif task in DR.PPO_TASKS and budget.name != "smoke":  # one BPO rollout takes ~15 s
-        runs = runs | {"ppo": [DR.ppo_run(task, s, budget, root)
+        runs = runs | {"ppo": [DR.ppo_run(task, s, budget, root, progress=True)
                                for s in range(DR.counts(task, "diskill", budget)["seeds"])]}  # fmt: skip
     y = METRIC[figure]
     finals[figure] = DR.final_scores(figure, runs, y, reps=budget.bootstrap_reps)
@@ -1222,7 +1222,7 @@ for figure, (scores, verdicts) in finals.items():
 
 # %%
 t0 = time.perf_counter()
-runs_tt = DR.run_set("4.3b", budget, root)
+runs_tt = DR.run_set("4.3b", budget, root, progress=True)
 print(f"table tennis runs ready in {time.perf_counter() - t0:.0f} s")
 fig, axes = plt.subplots(1, 2, figsize=(11, 4))
 for ax, y in zip(axes, ("test_success", "test_return"), strict=True):
@@ -1291,7 +1291,7 @@ plt.show()
 # terms of the reward, such as the healthy bonus. **Ours**: the Fig. 4.4a run set above.
 
 # %%
-runs_hj = DR.run_set("4.4a", budget, root)
+runs_hj = DR.run_set("4.4a", budget, root, progress=True)
 fig, axes = plt.subplots(1, 3, figsize=(15, 4))
 for ax, y, label in zip(axes, ("test_return", "test_max_height", "test_goal_distance"),
                         ("(a) return", "(b) max height [m]", "(c) goal distance [m]"), strict=True):  # fmt: skip

@@ -157,15 +157,17 @@ def grid_contexts(shape: tuple[int, int]) -> np.ndarray:
 
 
 def run_beer_pong(
-    method: str, seed: int, root: str | Path, budget: Budget | str | None = None
-) -> Path:
+    method: str, seed: int, root: str | Path, budget: Budget | str | None = None,
+    *, progress: bool = False,
+) -> Path:  # fmt: skip
     """Train one method for one seed in a run directory under ``root`` (reused if done).
 
     Rows of ``metrics.jsonl`` carry ``samples`` (executed episodes so far) and, every
     ``test_every`` iterations and at the end, ``test_return``, ``test_success`` and
     ``expected_entropy`` (:func:`vslbook.experiments.svsl_mixtures.run_method`).
+    ``progress``: a bar over the iterations.
     """
-    return mx.run_method(TASK, method, seed, root, beer_pong_counts(budget))
+    return mx.run_method(TASK, method, seed, root, beer_pong_counts(budget), progress=progress)
 
 
 def draw_learning_curves(

@@ -50,6 +50,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
+from tqdm.auto import tqdm
 
 from vslbook.erl import hireps, ladips
 from vslbook.erl.mixture_baseline import MixtureAlgorithm
@@ -121,31 +122,35 @@ def _entropy_due(it: int, test_every: int, last: int, extra: dict[str, Any]) -> 
     return it % (test_every * extra.get("entropy_every", 1)) == 0 or it == last
 
 
-def run_method(task: str, method: str, seed: int, root: str | Path, counts: dict[str, Any]) -> Path:
+def run_method(
+    task: str, method: str, seed: int, root: str | Path, counts: dict[str, Any],
+    *, progress: bool = False,
+) -> Path:  # fmt: skip
     """Train one method for one seed on ``task`` in a run directory under ``root``.
 
     A finished run with the same configuration is reused, an unfinished one resumed. Rows
     of ``metrics.jsonl`` carry ``samples`` (executed episodes so far) and, every
     ``test_every`` iterations and at the end, ``test_return``, ``test_success`` and
     ``expected_entropy``. The baselines test as often as SVSL (the same number of test
-    points over their run).
+    points over their run). ``progress``: a bar over the iterations.
     """
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
     config = method_config(task, method, counts)
     ent = _entropy_spec(counts)
     if isinstance(config, SVSLConfig):
-        return _run_svsl(task, config, int(seed), root, ent)
+        return _run_svsl(task, config, int(seed), root, ent, progress)
     svsl_cfg = method_config(task, "SVSL", counts)
     points = max(1, svsl_cfg.total_iterations // svsl_cfg.test_every)
     test = {"test_every": max(1, config.iterations // points),
             "test_contexts": counts["test_contexts"]}  # fmt: skip
-    return _run_baseline(task, method, config, int(seed), root, test | ent)
+    return _run_baseline(task, method, config, int(seed), root, test | ent, progress)
 
 
 def _run_svsl(
-    task_name: str, config: SVSLConfig, seed: int, root: str | Path, extra: dict[str, Any]
-) -> Path:
+    task_name: str, config: SVSLConfig, seed: int, root: str | Path, extra: dict[str, Any],
+    progress: bool = False,
+) -> Path:  # fmt: skip
     """:func:`vslbook.erl.svsl.train` in a run directory, adding the expected entropy."""
     record = {"algo": "svsl", "env": task_name, "task_kwargs": {}, "seed": seed} | asdict(config)
     rd = open_run(root, record | extra)
@@ -157,6 +162,8 @@ def _run_svsl(
     if saved is not None:
         s.load_state_dict(saved["svsl"])
     contexts = entropy_contexts(task_name, extra)
+    bar = tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
+               desc=f"SVSL {task_name} s{seed}")  # fmt: skip
 
     def log(it: int, metrics: dict[str, float]) -> None:
         if "test_return" in metrics and _entropy_due(
@@ -164,25 +171,30 @@ def _run_svsl(
         ):
             metrics["expected_entropy"] = _svsl_entropy(s, contexts, extra["entropy_draws"])
         rd.log(it, **metrics)
+        bar.update(1)
 
-    train_svsl(
-        task, config, seed, state=s, callback=log,
-        checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
-        checkpoint_every=50,
-    )  # fmt: skip
+    with bar:
+        train_svsl(
+            task, config, seed, state=s, callback=log,
+            checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
+            checkpoint_every=50,
+        )  # fmt: skip
     rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
     return rd.path
 
 
 def _run_baseline(
-    task_name: str, method: str, config: Any, seed: int, root: str | Path, extra: dict[str, Any]
-) -> Path:
+    task_name: str, method: str, config: Any, seed: int, root: str | Path, extra: dict[str, Any],
+    progress: bool = False,
+) -> Path:  # fmt: skip
     """HiREPS or LaDiPS in a run directory, with SVSL's test protocol every ``test_every``."""
     record = {"algo": method.lower(), "env": task_name, "seed": seed} | asdict(config)
     rd = open_run(root, record | extra)
     if rd.done:
         return rd.path
-    algo = train_baseline(rd, shared_task(task_name), method, config, seed, extra, workers=None)
+    algo = train_baseline(
+        rd, shared_task(task_name), method, config, seed, extra, workers=None, progress=progress
+    )
     rd.mark_done({"samples": algo.total_samples, "iterations": config.iterations})
     return rd.path
 
@@ -219,11 +231,8 @@ def train_baseline(
     stop = config.iterations
     if stop_after is not None:
         stop = min(algo.iterations_done + int(stop_after), stop)
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=config.iterations, initial=algo.iterations_done, desc=method)
+    bar = tqdm(total=config.iterations, initial=algo.iterations_done, disable=not progress,
+               desc=f"{method} {task.name} s{seed}")  # fmt: skip
     for i in range(algo.iterations_done, stop):
         metrics = algo.iteration()
         metrics["samples_iteration"] = metrics.pop("samples")
@@ -241,12 +250,10 @@ def train_baseline(
                     mixture_of(algo), contexts, extra["entropy_draws"], rng
                 )
         rd.log(it, **metrics)
-        if bar is not None:
-            bar.update(1)
+        bar.update(1)
         if it % 25 == 0 or it == stop:
             rd.save_checkpoint({"algo": algo.state_dict()})
-    if bar is not None:
-        bar.close()
+    bar.close()
     return algo
 
 

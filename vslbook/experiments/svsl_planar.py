@@ -26,6 +26,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse, Rectangle
+from tqdm.auto import tqdm
 
 from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot import make_task
@@ -94,16 +95,21 @@ def variant_config(variant: str, budget: Budget | str | None = None) -> Any:
 
 
 def run_planar(
-    variant: str, seed: int, root: str | Path, budget: Budget | str | None = None
-) -> Path:
-    """Train one variant for one seed in a run directory under ``root`` (reused if done)."""
+    variant: str, seed: int, root: str | Path, budget: Budget | str | None = None,
+    *, progress: bool = False,
+) -> Path:  # fmt: skip
+    """Train one variant for one seed in a run directory under ``root`` (reused if done);
+    ``progress``: a bar over the iterations."""
     config = variant_config(variant, budget)
     if isinstance(config, SVSLConfig):
-        return run_svsl("planar-reacher", config, seed, root, checkpoint_every=200)
-    return _run_hireps(config, seed, root)
+        return run_svsl("planar-reacher", config, seed, root, checkpoint_every=200,
+                        progress=progress)  # fmt: skip
+    return _run_hireps(config, seed, root, progress)
 
 
-def _run_hireps(config: hireps.HiREPSConfig, seed: int, root: str | Path) -> Path:
+def _run_hireps(
+    config: hireps.HiREPSConfig, seed: int, root: str | Path, progress: bool = False
+) -> Path:
     record = {"algo": "hireps", "env": "planar-reacher", "seed": int(seed)} | asdict(config)
     rd = open_run(root, record)
     if rd.done:
@@ -114,10 +120,13 @@ def _run_hireps(config: hireps.HiREPSConfig, seed: int, root: str | Path) -> Pat
     if saved is not None:
         algo.load_state_dict(saved["hireps"])
         done = int(saved["iteration"])
-    for i in range(done, config.iterations):
-        rd.log(i + 1, **algo.iteration())
-        if (i + 1) % 100 == 0 or i + 1 == config.iterations:
-            rd.save_checkpoint({"hireps": algo.state_dict(), "iteration": i + 1})
+    with tqdm(total=config.iterations, initial=done, disable=not progress,
+              desc=f"HiREPS planar-reacher s{seed}") as bar:  # fmt: skip
+        for i in range(done, config.iterations):
+            rd.log(i + 1, **algo.iteration())
+            bar.update(1)
+            if (i + 1) % 100 == 0 or i + 1 == config.iterations:
+                rd.save_checkpoint({"hireps": algo.state_dict(), "iteration": i + 1})
     rd.mark_done({"iterations": config.iterations})
     return rd.path
 

@@ -46,6 +46,7 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
+from tqdm.auto import tqdm
 
 from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot import make_task
@@ -159,7 +160,9 @@ def reacher_configs(
 # -- runs ---------------------------------------------------------------------------------
 
 
-def _run_svsl(reward: str, config: SVSLConfig, seed: int, root: str | Path) -> Path:
+def _run_svsl(
+    reward: str, config: SVSLConfig, seed: int, root: str | Path, progress: bool = False
+) -> Path:
     """Algorithm 1 on the reacher in a run directory, tested on the shared evaluation goals.
 
     The directory is :func:`vslbook.erl.svsl.run`'s layout (config.json, metrics.jsonl,
@@ -179,21 +182,30 @@ def _run_svsl(reward: str, config: SVSLConfig, seed: int, root: str | Path) -> P
     saved = rd.load_checkpoint()
     if saved is not None:
         s.load_state_dict(saved["svsl"])
+    bar = tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
+               desc=f"SVSL Eq. {reward} s{seed}")  # fmt: skip
+
+    def log(it: int, metrics: dict[str, float]) -> None:
+        rd.log(it, **metrics)
+        bar.update(1)
+
     try:
         train(
-            task, config, int(seed), state=s, callback=lambda it, m: rd.log(it, **m),
+            task, config, int(seed), state=s, callback=log,
             checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
             checkpoint_every=max(config.test_every, 50),
         )  # fmt: skip
     finally:
+        bar.close()
         task.close()
     rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
     return rd.path
 
 
 def _run_ppo(
-    reward: str, config: PPOConfig, seed: int, root: str | Path, eval_every: int, eval_goals: int
-) -> Path:
+    reward: str, config: PPOConfig, seed: int, root: str | Path, eval_every: int, eval_goals: int,
+    progress: bool = False,
+) -> Path:  # fmt: skip
     """PPO (Table A.5) in its own run directory ``ppo-reacher5-ch3-s{seed}-{hash}``.
 
     :func:`vslbook.erl.ppo.train_ppo` checkpoints into the directory (and resumes from it);
@@ -208,7 +220,7 @@ def _run_ppo(
         return rd.path
     rows = train_ppo(
         reward, config, int(seed), run_dir=rd.path, eval_every=eval_every,
-        eval_episodes=eval_goals,
+        eval_episodes=eval_goals, progress=progress,
     )  # fmt: skip
     logged = len(rd.metrics())  # a crash between logging and DONE: do not log twice
     for i, row in enumerate(rows[logged:], start=logged):
@@ -225,12 +237,14 @@ def run_reacher(
     budget: Budget | str | None = None,
     *,
     config: SVSLConfig | PPOConfig | None = None,
+    progress: bool = False,
 ) -> Path:
     """Train ``method`` ("SVSL" or "PPO") on Eq. ``reward`` for one seed under ``root``.
 
     A finished run directory with the same configuration is reused; an interrupted one
     resumes. ``config`` replaces the budget's configuration of that method (e.g. a tiny
     one for tests); the evaluation goals and schedule still come from ``budget``.
+    ``progress``: a bar over the iterations (SVSL) or environment steps (PPO).
     """
     method, reward = _check_method(method), _check_reward(reward)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
@@ -240,19 +254,20 @@ def run_reacher(
     if method == "SVSL":
         if config is not None and not isinstance(config, SVSLConfig):
             raise ValueError(f"config for SVSL must be an SVSLConfig, got {type(config).__name__}")
-        return _run_svsl(reward, config or svsl_cfg, int(seed), root)
+        return _run_svsl(reward, config or svsl_cfg, int(seed), root, progress)
     if config is not None and not isinstance(config, PPOConfig):
         raise ValueError(f"config for PPO must be a PPOConfig, got {type(config).__name__}")
     cfg = config or ppo_cfg
     eval_every = max(cfg.n_rollout_steps, n["ppo_eval_every"] // cfg.n_rollout_steps
                      * cfg.n_rollout_steps)  # fmt: skip
-    return _run_ppo(reward, cfg, int(seed), root, eval_every, n["eval_goals"])
+    return _run_ppo(reward, cfg, int(seed), root, eval_every, n["eval_goals"], progress)
 
 
 def reacher_runs(
-    root: str | Path, budget: Budget | str | None = None
+    root: str | Path, budget: Budget | str | None = None, *, progress: bool = False
 ) -> dict[tuple[str, str], list[Path]]:
-    """All runs of Fig. 3.5 at a budget (trained, or reused where finished), in sequence."""
+    """All runs of Fig. 3.5 at a budget (trained, or reused where finished), in sequence;
+    ``progress``: a bar per run."""
     n = reacher_counts(budget)
     out: dict[tuple[str, str], list[Path]] = {}
     for reward in REWARDS:
@@ -260,7 +275,8 @@ def reacher_runs(
             if method == "PPO" and reward not in n["ppo_rewards"]:
                 continue
             out[(method, reward)] = [
-                run_reacher(method, reward, seed, root, budget) for seed in range(n["seeds"])
+                run_reacher(method, reward, seed, root, budget, progress=progress)
+                for seed in range(n["seeds"])
             ]
     return out
 

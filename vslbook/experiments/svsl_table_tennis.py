@@ -170,15 +170,18 @@ def _task() -> Any:
 
 
 def run_table_tennis(
-    method: str, seed: int, root: str | Path, budget: Budget | str | None = None
-) -> Path:
+    method: str, seed: int, root: str | Path, budget: Budget | str | None = None,
+    *, progress: bool = False,
+) -> Path:  # fmt: skip
     """Train one method for one seed in a run directory under ``root`` (reused if done).
 
     Rows of ``metrics.jsonl`` carry ``samples`` (executed episodes so far) and, at every
     test point, ``test_return``, ``test_success`` and ``expected_entropy``
-    (:func:`vslbook.experiments.svsl_mixtures.run_method`).
+    (:func:`vslbook.experiments.svsl_mixtures.run_method`). ``progress``: a bar over the
+    iterations.
     """
-    return mx.run_method(TASK, method, seed, root, table_tennis_counts(budget))
+    return mx.run_method(TASK, method, seed, root, table_tennis_counts(budget),
+                         progress=progress)  # fmt: skip
 
 
 def run_all(
@@ -186,13 +189,16 @@ def run_all(
     budget: Budget | str | None = None,
     methods: tuple[str, ...] = METHODS,
     seeds: int | None = None,
+    *,
+    progress: bool = False,
 ) -> dict[str, list[Path]]:
     """Every method for seeds 0, …, ``seeds`` − 1 (default: the budget's), one after the
     other; returns ``{method: [run directories]}`` for :func:`learning_curves`."""
     for m in methods:
         mx.check_method(m)
     n = table_tennis_counts(budget)["seeds"] if seeds is None else mx.check_count("seeds", seeds)
-    return {m: [run_table_tennis(m, s, root, budget) for s in range(n)] for m in methods}
+    return {m: [run_table_tennis(m, s, root, budget, progress=progress) for s in range(n)]
+            for m in methods}  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------
