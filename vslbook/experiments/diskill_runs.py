@@ -69,8 +69,8 @@ def env_id(task: str) -> str:
 #: qualitative result of Fig. 4.2 / 4.3c must show and Di-SkilL passes BBRL only after
 #: about 200 iterations (seed 0: −16.5 against −20.6 at iteration 200, −10.8 against −18.5
 #: at 260; at 150, the 5 % this preset used to give, the IQM over five seeds was −22.1
-#: against BBRL's −20.9); the tasks with slower episodes get 2 % and at most 5 experts (an iteration
-#: of box pushing with 10 experts runs 500 episodes, about 25 s on one core).
+#: against BBRL's −20.9); the tasks with slower episodes get 2 % and at most 5 experts
+#: (an iteration of box pushing with 10 experts runs 500 episodes, about 25 s on one core).
 REDUCED = {
     "reacher5": (0.10, None),
     "table-tennis-4d": (0.02, None),
