@@ -1140,6 +1140,9 @@ print(f"experts that are the most probable somewhere on the disk: {len(owners)} 
       f"{model.config.n_experts}")  # fmt: skip
 print(f"active experts per goal: mean {active.mean():.2f}, at least two at "
       f"{(active >= 2).mean():.0%} of the goals")  # fmt: skip
+several = len(owners) >= 2 and (active >= 2).mean() > 0.5
+print("thesis: experts specialise on different parts of the disk, two or more active in most "
+      f"of it — ours: {'as in the thesis' if several else 'NOT as in the thesis'}")
 for goal in goals:
     rs = [r for r in RF.reaches(model, goal) if r["gating"] >= 0.05]
     print(f"goal {goal}: " + ", ".join(f"expert {r['expert']} (π(o|c) {r['gating']:.2f}, "
