@@ -29,3 +29,32 @@ def test_robot_benchmark_counts_the_physics_of_python_and_compiled_loops(task, c
 def test_run_set_timing_rejects_an_unknown_set():
     with pytest.raises(SystemExit, match=r"unknown run set\(s\) \['nope'\]"):
         _load("dime_throughput").time_run_sets("smoke", None, ["nope"])
+
+
+def test_erl_run_sets_train_the_notebook_runs_and_reuse_them(tmp_path, capsys, monkeypatch):
+    """Chapter 3's planar set at smoke: the three Fig. 3.1 variants, one seed each; a second
+    pass finds them finished (same run directories)."""
+    from vslbook.experiments.erl_run_sets import run_sets
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    total = _load("erl_run_sets").time_run_sets(3, "smoke", str(tmp_path), ["planar"])
+    out = capsys.readouterr().out
+    assert "planar" in out and "  3 runs" in out and "beer-pong" not in out and total > 0
+    done = {p: p.stat().st_mtime_ns for p in tmp_path.glob("*/DONE")}
+    assert len(done) == 3
+    again = run_sets(3, "smoke", tmp_path, only=["planar"])["planar"]
+    assert sorted(again) == ["HiREPS", "SVSL", "SVSL, no responsibilities"]
+    assert {p / "DONE" for ps in again.values() for p in ps} == set(done)
+    assert all(p.stat().st_mtime_ns == t for p, t in done.items())  # reused, not retrained
+    with pytest.raises(SystemExit, match=r"unknown run set\(s\) \['4.9'\]"):
+        _load("erl_run_sets").time_run_sets(4, "smoke", None, ["4.9"])
+    with pytest.raises(ValueError, match="chapter must be one of"):
+        run_sets(5, "smoke", tmp_path)
+
+
+def test_chapter4_run_sets_are_the_notebook_figures():
+    from vslbook.experiments.diskill_runs import FIGURES
+    from vslbook.experiments.erl_run_sets import RUN_SETS
+
+    assert list(RUN_SETS[4]) == list(FIGURES)
+    assert list(RUN_SETS[3]) == ["planar", "beer-pong", "table-tennis", "reacher"]
