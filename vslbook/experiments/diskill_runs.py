@@ -68,10 +68,11 @@ def env_id(task: str) -> str:
 #: task → (share of the thesis's iterations, most experts) at the reduced budget: the
 #: 5-link reacher keeps its 10 experts and gets 10 % of the iterations (300), because the
 #: qualitative result of Fig. 4.2 / 4.3c must show and Di-SkilL passes BBRL only after
-#: about 200 iterations (seed 0: −16.5 against −20.6 at iteration 200, −10.8 against −18.5
-#: at 260; at 150, the 5 % this preset used to give, the IQM over five seeds was −22.1
-#: against BBRL's −20.9); the tasks with slower episodes get 2 % and at most 5 experts
-#: (an iteration of box pushing with 10 experts runs 500 episodes, about 25 s on one core).
+#: about 200 iterations: at 300, seeds 0-2 end at −7.0 / −6.0 / −7.7 against BBRL's
+#: −17.3 / −16.2 / −12.7; at 150, the 5 % this preset used to give, BBRL was ahead (IQM
+#: over five seeds −22.1 against −20.9). The tasks with slower episodes get 2 % and at most
+#: 5 experts (an iteration of box pushing with 10 experts runs 500 episodes, about 25 s on
+#: one core).
 REDUCED = {
     "reacher5": (0.10, None),
     "table-tennis-4d": (0.02, None),
