@@ -1171,19 +1171,11 @@ for goal in goals:
 # show that the code runs (2 iterations, 2 experts with 4 samples each).
 
 # %%
-THESIS_4 = {
-    "4.3c": "thesis: Di-SkilL > BBRL > LinDi-SkilL, PPO poor",
-    "4.4a": "thesis: Di-SkilL ≈ BBRL, LinDi-SkilL slower",
-    "4.4b": "thesis: Di-SkilL > LinDi-SkilL > BBRL, PPO poor",
-    "4.4c": "thesis: Di-SkilL slightly > BBRL at the end > LinDi-SkilL",
-    "4.4d": "thesis: Di-SkilL > BBRL > LinDi-SkilL",
-}
-METRIC = {"4.3c": "test_return", "4.4a": "test_return", "4.4b": "test_success",
-          "4.4c": "test_success", "4.4d": "test_success"}  # fmt: skip
+FIGS_4 = ("4.3c", "4.4a", "4.4b", "4.4c", "4.4d")
 fig, axes = plt.subplots(1, 5, figsize=(20, 4))
 t0 = time.perf_counter()
 finals = {}
-for ax, figure in zip(axes, THESIS_4, strict=True):
+for ax, figure in zip(axes, FIGS_4, strict=True):
     task = DR.FIGURES[figure][0]
     runs = runs_5lr if figure == "4.3c" else DR.run_set(figure, budget, root, progress=True)
     if figure == "4.3c":
@@ -1191,10 +1183,10 @@ for ax, figure in zip(axes, THESIS_4, strict=True):
     elif task in DR.PPO_TASKS and budget.name != "smoke":  # one BPO rollout takes ~15 s
         runs = runs | {"ppo": [DR.ppo_run(task, s, budget, root, progress=True)
                                for s in range(DR.counts(task, "diskill", budget)["seeds"])]}  # fmt: skip
-    y = METRIC[figure]
+    y = DR.METRIC[figure]
     finals[figure] = DR.final_scores(figure, runs, y, reps=budget.bootstrap_reps)
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
-                         ylabel=y.replace("_", " ") + " (IQM)", thesis=THESIS_4[figure])  # fmt: skip
+                         ylabel=y.replace("_", " ") + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
     c = DR.counts(task, "diskill", budget)
     ax.set_title(f"Fig. {figure}: {task}\n{c['iterations']} it., {c['seeds']} seed(s)", fontsize=9)
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
@@ -1205,7 +1197,7 @@ plt.show()
 # Each run's last evaluation, IQM [95 % CI] over seeds, and the thesis's orderings at the
 # end of training (ours at this budget's counts; only 5LR is meant to show it at reduced).
 for figure, (scores, verdicts) in finals.items():
-    print(f"Fig. {figure} ({METRIC[figure]}): " + "; ".join(
+    print(f"Fig. {figure} ({DR.METRIC[figure]}): " + "; ".join(
         f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]" for r in scores.itertuples()))
     for v in verdicts.itertuples():
         verdict = "as in the thesis" if v.as_in_thesis else "NOT as in the thesis"
@@ -1232,13 +1224,19 @@ fig, axes = plt.subplots(1, 2, figsize=(11, 4))
 for ax, y in zip(axes, ("test_success", "test_return"), strict=True):
     draw_learning_curves(ax, DR.curves(runs_tt, y, reps=budget.bootstrap_reps),
                          ylabel=y.replace("_", " ") + " (IQM)",
-                         thesis="thesis: BBRL ≳ Di-SkilL > V3 > V2" if y == "test_success" else None)  # fmt: skip
+                         thesis=DR.THESIS_OUTCOME["4.3b"] if y == "test_success" else None)  # fmt: skip
 c = DR.counts("table-tennis-4d", "diskill", budget)
 fig.suptitle(f"Fig. 4.3b (ours, budget {budget.name}: {c['iterations']} iterations, "
              f"{c['seeds']} seed(s); thesis: 4500 iterations)", fontsize=10)  # fmt: skip
 fig.tight_layout()
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
+scores, verdicts = DR.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
+print("final test success: " + "; ".join(
+    f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]" for r in scores.itertuples()))
+for v in verdicts.itertuples():
+    print(f"    thesis: {v.ahead} above {v.behind} — ours: "
+          f"{'as in the thesis' if v.as_in_thesis else 'NOT as in the thesis'}")
 
 
 # %% [markdown]

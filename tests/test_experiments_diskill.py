@@ -159,3 +159,22 @@ def test_skills_at_a_context(reacher_runs):
     with pytest.raises(ValueError, match="not 'ball'"):
         SK.draw_skills(ax, model, c, "ball")
     plt.close(fig)
+
+
+def test_chapter4_curves_from_the_command_line(tmp_path, monkeypatch):
+    """`vslbook figure fig4-4a`: trains the hopper-jump run set in ./runs and saves the panel,
+    whose title says how the counts differ from the thesis's."""
+    from vslbook import figures
+    from vslbook.registry import FIGURES
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    monkeypatch.chdir(tmp_path)
+    paths = FIGURES["fig4-4a"].make(budget="smoke", out_dir=tmp_path / "out")
+    assert sorted(p.name for p in paths) == ["fig4-4a.pdf", "fig4-4a.png"]
+    assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3  # Di-SkilL, BBRL, LinDi-SkilL
+    fig = figures.draw_diskill_curves("4.4a", "smoke", tmp_path / "runs", progress=False)
+    title = fig.axes[0].get_title()
+    assert "2 of 1400 iterations, 1 of 24 seeds, 2 of 3 experts, 4 of 80 samples" in title
+    plt.close(fig)
+    with pytest.raises(ValueError, match="unknown figure '4.7'"):
+        figures.draw_diskill_curves("4.7", "smoke", tmp_path / "runs")

@@ -251,6 +251,48 @@ def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
     return fig
 
 
+def draw_diskill_curves(
+    figure: str, budget: Budget | str | None = None, root: str | Path = "runs",
+    *, progress: bool = True,
+) -> plt.Figure:  # fmt: skip
+    """One Chapter 4 learning-curve panel (Figs. 4.3b, 4.3c, 4.4a-d) at a budget.
+
+    Trains the figure's run set in ``root`` where not finished (as the ``04_diskill``
+    notebook does: :mod:`vslbook.experiments.erl_run_sets`), then draws the IQM and 95 %
+    stratified-bootstrap band over seeds of the test return or success against executed
+    episodes, with the thesis's outcome and the counts that differ from the thesis's.
+    """
+    from vslbook.experiments import diskill_runs as DR
+    from vslbook.experiments.erl_run_sets import RUN_SETS
+    from vslbook.experiments.svsl_mixtures import draw_learning_curves
+
+    if figure not in DR.FIGURES:
+        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(DR.FIGURES)}")
+    b = get_budget(budget)
+    use_style()
+    runs = RUN_SETS[4][figure](b, Path(root), progress)
+    y = DR.METRIC[figure]
+    fig, ax = plt.subplots(figsize=(6, 4.2))
+    draw_learning_curves(
+        ax, DR.curves(runs, y, reps=b.bootstrap_reps),
+        ylabel=y.replace("_", " ") + " (IQM)", thesis=DR.THESIS_OUTCOME[figure],
+    )  # fmt: skip
+    task = DR.FIGURES[figure][0]
+    c = DR.counts(task, "diskill", b)
+    full = DR.counts(task, "diskill", "full")
+    cfg = DR.diskill_config(task, "diskill")
+    differs = [f"{c['iterations']} of {full['iterations']} iterations",
+               f"{c['seeds']} of {full['seeds']} seeds"]  # fmt: skip
+    if "n_experts" in c:
+        differs.append(f"{c['n_experts']} of {cfg.n_experts} experts")
+    if "samples_per_expert" in c:
+        differs.append(f"{c['samples_per_expert']} of {cfg.samples_per_expert} samples per expert")
+    ax.set_title(f"Fig. {figure}: {task} (ours, budget {b.name}: " + ", ".join(differs) + ")",
+                 fontsize=8, wrap=True)  # fmt: skip
+    fig.tight_layout()
+    return fig
+
+
 def _saver(fig_id: str, draw):
     def make(budget: Budget | None = None, out_dir: str | Path | None = None) -> list[Path]:
         fig = draw(budget=budget)
@@ -281,3 +323,10 @@ register_figure(
     _saver("fig5-3-published", lambda budget=None: draw_fig_5_3_published(budget=budget)),
     doc="Fig. 5.3: dog, humanoid, MyoSuite (11 panels) from the published DIME curves",
 )
+for _fig in ("4.3b", "4.3c", "4.4a", "4.4b", "4.4c", "4.4d"):
+    _id = "fig" + _fig.replace(".", "-")
+    register_figure(
+        _id,
+        _saver(_id, lambda budget=None, _f=_fig: draw_diskill_curves(_f, budget=budget)),
+        doc=f"Fig. {_fig}: Chapter 4 learning curves, trained at the budget in ./runs",
+    )

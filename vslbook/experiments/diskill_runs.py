@@ -22,8 +22,8 @@ from vslbook.erl.diskill_config import diskill_config
 from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
 
 __all__ = [
-    "FIGURES", "LABELS", "PPO_TASKS", "REDUCED", "THESIS_AHEAD", "counts", "curves", "env_id",
-    "final_scores", "load_model", "ppo_run", "ppo_steps", "run_set",
+    "FIGURES", "LABELS", "METRIC", "PPO_TASKS", "REDUCED", "THESIS_AHEAD", "THESIS_OUTCOME",
+    "counts", "curves", "env_id", "final_scores", "load_model", "ppo_run", "ppo_steps", "run_set",
 ]  # fmt: skip
 
 #: figure → (task, methods) as in the thesis (PPO runs separately, step-based).
@@ -51,6 +51,20 @@ THESIS_AHEAD: dict[str, tuple[tuple[str, str], ...]] = {
     "4.4c": (("diskill", "bbrl"), ("diskill", "lindiskill"), ("bbrl", "lindiskill")),
     "4.4d": (("diskill", "bbrl"), ("diskill", "lindiskill"), ("bbrl", "lindiskill")),
 }
+#: figure → the thesis's outcome in a line (the legend note of each panel).
+THESIS_OUTCOME = {
+    "4.3b": "thesis: BBRL ≳ Di-SkilL > V3 > V2",
+    "4.3c": "thesis: Di-SkilL > BBRL > LinDi-SkilL, PPO poor",
+    "4.4a": "thesis: Di-SkilL ≈ BBRL, LinDi-SkilL slower",
+    "4.4b": "thesis: Di-SkilL > LinDi-SkilL > BBRL, PPO poor",
+    "4.4c": "thesis: Di-SkilL slightly > BBRL at the end > LinDi-SkilL",
+    "4.4d": "thesis: Di-SkilL > BBRL > LinDi-SkilL",
+}
+#: figure → what its panel plots: the test return (5LR, hopper jump) or success rate.
+METRIC = {
+    "4.3b": "test_success", "4.3c": "test_return", "4.4a": "test_return",
+    "4.4b": "test_success", "4.4c": "test_success", "4.4d": "test_success",
+}  # fmt: skip
 #: tasks where the thesis also runs step-based PPO (Figs. 4.3c and 4.4b; Tables B.3, B.6).
 PPO_TASKS = ("reacher5", "box-pushing-obstacle")
 
