@@ -1163,12 +1163,13 @@ for goal in goals:
 # with BBRL, LinDi-SkilL slower; BPO — Di-SkilL highest, then LinDi-SkilL, BBRL lower, PPO
 # poor; TT-H — Di-SkilL and BBRL similar, Di-SkilL slightly higher at the end,
 # LinDi-SkilL poor; MG — Di-SkilL clearly above BBRL, LinDi-SkilL poor. The orderings
-# checked below are `vslbook.experiments.diskill_runs.THESIS_AHEAD`. **Ours**: the counts printed with each panel; at
-# the `reduced` budget the 5LR panel has 10 % of the thesis's iterations (Di-SkilL passes
-# BBRL after about 200; PPO gets 5 % of its steps, so its curve spans half the axis) and
-# the others 2 % with at most 5 experts (`vslbook.experiments.diskill_runs.REDUCED`), so
-# only the 5LR panel is meant to show the thesis's ordering; at `smoke` the panels only
-# show that the code runs (2 iterations, 2 experts with 4 samples each).
+# checked below are `vslbook.experiments.diskill_runs.THESIS_AHEAD`. **Ours**: the counts
+# printed with each panel; at the `reduced` budget the 5LR panel has 10 % of the thesis's
+# iterations (Di-SkilL passes BBRL after about 200; PPO gets 5 % of its steps, so its
+# curve spans half the axis) and the others 2 % with at most 5 experts
+# (`vslbook.experiments.diskill_runs.REDUCED`), so only the 5LR panel is meant to show the
+# thesis's ordering; at `smoke` the panels only show that the code runs (2 iterations,
+# 2 experts with 4 samples each).
 
 # %%
 FIGS_4 = ("4.3c", "4.4a", "4.4b", "4.4c", "4.4d")
