@@ -45,3 +45,20 @@ def test_smoke_run_reloads_and_is_reused(variant, tmp_path):
     a = P._sample_means(model, c, 4, np.random.default_rng(1))[0]
     b = P._sample_means(again, c, 4, np.random.default_rng(1))[0]
     np.testing.assert_array_equal(a, b)
+
+
+def test_fig_3_1_from_the_command_line(tmp_path, monkeypatch):
+    """`vslbook figure fig3-1`: the notebook's planar run set in ./runs, six panels, and a
+    title that says how the counts differ from the thesis's."""
+    from vslbook import figures
+    from vslbook.cli import main
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    monkeypatch.chdir(tmp_path)
+    assert main(["figure", "fig3-1", "--budget", "smoke", "--out", str(tmp_path / "out")]) == 0
+    assert (tmp_path / "out" / "fig3-1.png").stat().st_size > 10_000
+    assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3
+    fig = figures.draw_fig_3_1("smoke", tmp_path / "runs", progress=False)
+    assert len(fig.axes) == 6
+    assert "2 experts, K = 50 of 350, seed 0 of 1" in fig._suptitle.get_text()
+    plt.close(fig)

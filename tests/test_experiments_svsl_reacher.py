@@ -199,3 +199,25 @@ def test_fig_3_5_goes_logarithmic_only_where_returns_span_decades() -> None:
     curves = pd.DataFrame(rows, columns=["method", "reward", "seed", "episodes", "return"])
     fig = sr.draw_fig_3_5(curves, "smoke")
     assert [ax.get_yscale() for ax in fig.axes[:3]] == ["linear", "linear", "symlog"]
+
+
+@pytest.mark.slow
+def test_fig_3_5_from_the_command_line(tiny_runs: dict, monkeypatch) -> None:
+    """`vslbook figure fig3-5` draws the runs `reacher_runs` returns for the budget (here the
+    module's tiny runs stand in for the smoke run set)."""
+    import matplotlib.pyplot as plt
+
+    from vslbook import figures
+
+    paths = {k: v for k, v in tiny_runs.items() if isinstance(k, tuple)}
+    seen = {}
+
+    def fake_runs(root, budget, *, progress=False):
+        seen.update(root=root, budget=budget.name, progress=progress)
+        return paths
+
+    monkeypatch.setattr(sr, "reacher_runs", fake_runs)
+    fig = figures.draw_fig_3_5_runs("smoke", tiny_runs["root"], progress=False)
+    assert seen == {"root": tiny_runs["root"], "budget": "smoke", "progress": False}
+    assert len(fig.axes) == 3 and all(ax.lines for ax in (fig.axes[0], fig.axes[2]))
+    plt.close(fig)

@@ -293,6 +293,48 @@ def draw_diskill_curves(
     return fig
 
 
+def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
+                 *, progress: bool = True) -> plt.Figure:  # fmt: skip
+    """Fig. 3.1 at a budget: SVSL with and without the responsibilities and HiREPS on the
+    planar reacher, seed 0 — the chosen experts' mean solutions at six targets and the
+    per-expert context distributions. Trains the ``03_svsl`` notebook's planar run set in
+    ``root`` where not finished (:mod:`vslbook.experiments.erl_run_sets`)."""
+    from vslbook.experiments import svsl_planar as P
+    from vslbook.experiments.erl_run_sets import RUN_SETS
+
+    b = get_budget(budget)
+    use_style()
+    runs = RUN_SETS[3]["planar"](b, Path(root), progress)
+    n = P.planar_counts(b)
+    fig, axes = plt.subplots(2, 3, figsize=(12, 8))
+    for j, variant in enumerate(P.VARIANTS):
+        model = P.load_model(runs[variant][0])
+        P.draw_solutions(axes[0, j], model)
+        axes[0, j].set_title(f"{variant}: mean solutions (seed 0)", fontsize=9)
+        P.draw_context_coverage(axes[1, j], model)
+        axes[1, j].set_title("context distributions", fontsize=9)
+    full = P.planar_counts("full")
+    k = n["iterations_per_expert"]
+    k_full = full["iterations_per_expert"]
+    k_note = "" if k == k_full else f", K = {k} of {k_full}"
+    fig.suptitle(f"Fig. 3.1 (ours, budget {b.name}: {n['n_experts']} experts{k_note}, seed 0 of "
+                 f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)", fontsize=10)  # fmt: skip
+    fig.tight_layout()
+    return fig
+
+
+def draw_fig_3_5_runs(budget: Budget | str | None = None, root: str | Path = "runs",
+                      *, progress: bool = True) -> plt.Figure:  # fmt: skip
+    """Fig. 3.5 at a budget: SVSL against PPO on the 5-link reacher with rewards 3.8-3.10.
+    Trains the ``03_svsl`` notebook's reacher run set in ``root`` where not finished."""
+    from vslbook.experiments import svsl_reacher as RE
+
+    b = get_budget(budget)
+    use_style()
+    runs = RE.reacher_runs(Path(root), b, progress=progress)
+    return RE.draw_fig_3_5(RE.reacher_curves(runs), b)
+
+
 def _saver(fig_id: str, draw):
     def make(budget: Budget | None = None, out_dir: str | Path | None = None) -> list[Path]:
         fig = draw(budget=budget)
@@ -330,3 +372,13 @@ for _fig in ("4.3b", "4.3c", "4.4a", "4.4b", "4.4c", "4.4d"):
         _saver(_id, lambda budget=None, _f=_fig: draw_diskill_curves(_f, budget=budget)),
         doc=f"Fig. {_fig}: Chapter 4 learning curves, trained at the budget in ./runs",
     )
+register_figure(
+    "fig3-1",
+    _saver("fig3-1", lambda budget=None: draw_fig_3_1(budget=budget)),
+    doc="Fig. 3.1: SVSL with / without responsibilities and HiREPS, planar reacher, in ./runs",
+)
+register_figure(
+    "fig3-5",
+    _saver("fig3-5", lambda budget=None: draw_fig_3_5_runs(budget=budget)),
+    doc="Fig. 3.5: SVSL against PPO on the 5-link reacher (Eqs. 3.8-3.10), trained in ./runs",
+)
