@@ -345,40 +345,23 @@ def _saver(fig_id: str, draw):
     return make
 
 
-register_figure(
-    "movement-primitives",
-    _saver("movement-primitives", lambda budget=None: draw_movement_primitives()),
-    doc="Ch. 2: ProMP with a via-point, DMP rollouts, ProDMP initial conditions",
-)
-register_figure(
-    "dime-published",
-    _saver("dime-published", lambda budget=None: draw_dime_published(budget=budget)),
-    doc="Ch. 5 data: published 10-seed DIME curves of 21 tasks, IQM with 95 % CIs",
-)
-register_figure(
-    "fig5-2-published",
-    _saver("fig5-2-published", lambda budget=None: draw_fig_5_2_published(budget=budget)),
-    doc="Fig. 5.2 (a)-(b): Ant-v3, Humanoid-v3 from the published DIME curves (IQM, 95 % CI)",
-)
-register_figure(
-    "fig5-3-published",
-    _saver("fig5-3-published", lambda budget=None: draw_fig_5_3_published(budget=budget)),
-    doc="Fig. 5.3: dog, humanoid, MyoSuite (11 panels) from the published DIME curves",
-)
+def _register(fig_id: str, draw, doc: str) -> None:
+    register_figure(fig_id, _saver(fig_id, draw), doc=doc)
+
+
+_register("movement-primitives", lambda budget=None: draw_movement_primitives(),
+          "Ch. 2: ProMP with a via-point, DMP rollouts, ProDMP initial conditions")
+_register("dime-published", lambda budget=None: draw_dime_published(budget=budget),
+          "Ch. 5 data: published 10-seed DIME curves of 21 tasks, IQM with 95 % CIs")
+_register("fig5-2-published", lambda budget=None: draw_fig_5_2_published(budget=budget),
+          "Fig. 5.2 (a)-(b): Ant-v3, Humanoid-v3 from the published DIME curves (IQM, 95 % CI)")
+_register("fig5-3-published", lambda budget=None: draw_fig_5_3_published(budget=budget),
+          "Fig. 5.3: dog, humanoid, MyoSuite (11 panels) from the published DIME curves")
+_register("fig3-1", lambda budget=None: draw_fig_3_1(budget=budget),
+          "Fig. 3.1: SVSL with / without responsibilities and HiREPS, planar reacher, in ./runs")
+_register("fig3-5", lambda budget=None: draw_fig_3_5_runs(budget=budget),
+          "Fig. 3.5: SVSL against PPO on the 5-link reacher (Eqs. 3.8-3.10), trained in ./runs")
 for _fig in ("4.3b", "4.3c", "4.4a", "4.4b", "4.4c", "4.4d"):
-    _id = "fig" + _fig.replace(".", "-")
-    register_figure(
-        _id,
-        _saver(_id, lambda budget=None, _f=_fig: draw_diskill_curves(_f, budget=budget)),
-        doc=f"Fig. {_fig}: Chapter 4 learning curves, trained at the budget in ./runs",
-    )
-register_figure(
-    "fig3-1",
-    _saver("fig3-1", lambda budget=None: draw_fig_3_1(budget=budget)),
-    doc="Fig. 3.1: SVSL with / without responsibilities and HiREPS, planar reacher, in ./runs",
-)
-register_figure(
-    "fig3-5",
-    _saver("fig3-5", lambda budget=None: draw_fig_3_5_runs(budget=budget)),
-    doc="Fig. 3.5: SVSL against PPO on the 5-link reacher (Eqs. 3.8-3.10), trained in ./runs",
-)
+    _register("fig" + _fig.replace(".", "-"),
+              lambda budget=None, _f=_fig: draw_diskill_curves(_f, budget=budget),
+              f"Fig. {_fig}: Chapter 4 learning curves, trained at the budget in ./runs")
