@@ -1110,14 +1110,14 @@ from pathlib import Path
 
 from vslbook.experiments import diskill_reacher as RF
 from vslbook.experiments import diskill_runs as DR
+from vslbook.experiments.erl_run_sets import RUN_SETS
 from vslbook.experiments.svsl_mixtures import draw_learning_curves
 
 root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
 c5 = DR.counts("reacher5", "diskill", budget)
 print("5LR counts at this budget:", c5)
 t0 = time.perf_counter()
-runs_5lr = DR.run_set("4.3c", budget, root, progress=True)
-ppo_5lr = [DR.ppo_run("reacher5", s, budget, root, progress=True) for s in range(c5["seeds"])]
+runs_5lr = RUN_SETS[4]["4.3c"](budget, root, True)  # Di-SkilL, BBRL, LinDi-SkilL and PPO
 print(f"5LR runs ready in {time.perf_counter() - t0:.0f} s")
 
 model = DR.load_model(runs_5lr["diskill"][0])
@@ -1178,12 +1178,9 @@ t0 = time.perf_counter()
 finals = {}
 for ax, figure in zip(axes, FIGS_4, strict=True):
     task = DR.FIGURES[figure][0]
-    runs = runs_5lr if figure == "4.3c" else DR.run_set(figure, budget, root, progress=True)
-    if figure == "4.3c":
-        runs = runs | {"ppo": ppo_5lr}
-    elif task in DR.PPO_TASKS and budget.name != "smoke":  # one BPO rollout takes ~15 s
-        runs = runs | {"ppo": [DR.ppo_run(task, s, budget, root, progress=True)
-                               for s in range(DR.counts(task, "diskill", budget)["seeds"])]}  # fmt: skip
+    # the figure's run set, with the PPO runs where the thesis has them (box pushing: not at
+    # smoke, where one rollout would take ~15 s): vslbook.experiments.erl_run_sets
+    runs = runs_5lr if figure == "4.3c" else RUN_SETS[4][figure](budget, root, True)
     y = DR.METRIC[figure]
     finals[figure] = DR.final_scores(figure, runs, y, reps=budget.bootstrap_reps)
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
