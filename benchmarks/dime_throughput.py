@@ -17,6 +17,11 @@ With ``--seeds S`` a second table times the same schedule for S seeds in one pro
 through the same path: updates per second per seed and in aggregate, and the wall time of S
 seeds' update against one seed's (the target of 1.5x is a CPU with 2 cores at 4x256).
 
+With ``--compile`` and ``--graphs`` (CUDA only) each configuration is also timed with the
+updates compiled by ``torch.compile`` and replayed as CUDA graphs
+(:class:`vslbook.srl.cuda_graphs.GraphedUpdates`, the training loop's default on a GPU),
+with the speed-up over eager; with ``--seeds`` too, the seed axis is timed in both modes.
+
 With ``--run-set BUDGET`` it instead trains the Chapter 5 notebook's live run sets
 (:func:`vslbook.experiments.dime_runs.chapter5_run_sets`: cheetah-run, the Pendulum
 ablations, the point-mass α panels) at that budget from scratch in ``--root`` (default: a
@@ -26,6 +31,7 @@ seed axis where the algorithm can).
 
     python benchmarks/dime_throughput.py --device cpu --steps 30 --seconds 60
     python benchmarks/dime_throughput.py --configs 4x256 --seeds 3
+    python benchmarks/dime_throughput.py --device cuda --graphs --seeds 10
     python benchmarks/dime_throughput.py --run-set reduced
     python benchmarks/dime_throughput.py --run-set reduced --sets ablations pointmass
 """
@@ -42,6 +48,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from vslbook.srl.cuda_graphs import GraphedUpdates
 from vslbook.srl.dime import (
     DIMEConfig,
     actor_update,
@@ -50,6 +57,7 @@ from vslbook.srl.dime import (
     make_agent,
     resolve_device,
 )
+from vslbook.srl.dime_updates import policy_noise
 from vslbook.srl.replay import Batch, ReplayBuffer
 from vslbook.srl.seed_axis import SeedStack
 
@@ -82,10 +90,12 @@ def measure(
     device: torch.device,
     updates: int,
     seconds: float,
-    compile_updates: bool,
+    compile_updates: bool = False,
+    graphs: bool = False,
     seed: int = 0,
 ) -> dict[str, float]:
-    """Critic and actor updates per second of the UTD/policy-delay schedule."""
+    """Critic and actor updates per second of the UTD/policy-delay schedule (eager, compiled
+    with ``torch.compile``, or replayed as CUDA graphs)."""
     cfg = DIMEConfig(
         n_diffusion_steps=n_steps, critic_hidden=width, v_min=-200.0, v_max=200.0,
         compile=compile_updates,
@@ -93,16 +103,26 @@ def measure(
     torch.manual_seed(seed)
     rng = np.random.default_rng(seed)
     agent = make_agent(OBS_DIM, ACT_DIM, cfg, v_min=cfg.v_min, v_max=cfg.v_max, device=device)
-    buffer = ReplayBuffer(10_000, OBS_DIM, ACT_DIM, device)
-    for _ in range(len_fill := 10_000):
-        buffer.add(
-            rng.standard_normal(OBS_DIM), rng.uniform(-1, 1, ACT_DIM), rng.normal(),
-            rng.standard_normal(OBS_DIM), rng.random() < 0.01,
-        )  # fmt: skip
-    assert len(buffer) == len_fill
+    buffer = _filled_buffer(device, rng)
+    # replay indices on the device where there is one (no host-to-device copy per batch)
+    indices = rng if device.type == "cpu" else torch.Generator(device=device).manual_seed(seed)
     critic_step, actor_step = critic_update, actor_update
     if compile_updates:
         critic_step, actor_step = torch.compile(critic_update), torch.compile(actor_update)
+    alpha_step = alpha_update
+    if graphs:  # the training loop's graphed path: noise drawn outside, steps replayed
+        replay = GraphedUpdates(agent)
+
+        def critic_step(agent, batch):
+            return replay.critic_update(batch, policy_noise(agent.policy, BATCH, None, device))
+
+        def actor_step(agent, obs):
+            stats, _ = replay.actor_alpha_update(obs, policy_noise(agent.policy, BATCH, None,
+                                                                   device))  # fmt: skip
+            return stats
+
+        def alpha_step(agent, running_cost):
+            return None  # taken inside the actor graph
 
     def sync() -> None:
         if device.type == "cuda":
@@ -113,14 +133,14 @@ def measure(
         n_actor, t_critic, t_actor = 0, 0.0, 0.0
         for i in range(1, k + 1):
             t0 = time.perf_counter()
-            batch = buffer.sample(cfg.batch_size, rng)
+            batch = buffer.sample(cfg.batch_size, indices)
             critic_step(agent, batch)
             sync()
             t1 = time.perf_counter()
             t_critic += t1 - t0
             if i % cfg.policy_delay == 0:
                 stats = actor_step(agent, batch.obs)
-                alpha_update(agent, stats.running_cost)
+                alpha_step(agent, stats.running_cost)
                 sync()
                 t_actor += time.perf_counter() - t1
                 n_actor += 1
@@ -146,19 +166,25 @@ def measure(
 
 
 def _filled_buffer(device: torch.device, rng: np.random.Generator) -> ReplayBuffer:
-    buffer = ReplayBuffer(10_000, OBS_DIM, ACT_DIM, device)
-    for _ in range(10_000):
-        buffer.add(
-            rng.standard_normal(OBS_DIM), rng.uniform(-1, 1, ACT_DIM), rng.normal(),
-            rng.standard_normal(OBS_DIM), rng.random() < 0.01,
-        )  # fmt: skip
+    """10,000 random transitions (standard normal states, uniform actions, 1 % terminal)."""
+    n = 10_000
+    buffer = ReplayBuffer(n, OBS_DIM, ACT_DIM, device)
+    state = {
+        "obs": rng.standard_normal((n, OBS_DIM)), "action": rng.uniform(-1, 1, (n, ACT_DIM)),
+        "reward": rng.normal(size=n), "next_obs": rng.standard_normal((n, OBS_DIM)),
+        "terminated": (rng.random(n) < 0.01).astype(np.float64),
+    }  # fmt: skip
+    state = {k: torch.as_tensor(v, dtype=torch.float32) for k, v in state.items()}
+    buffer.load_state_dict({**state, "capacity": n, "ptr": 0, "size": n})
     return buffer
 
 
 def measure_seeds(
-    n_steps: int, width: int, seeds: int, *, device: torch.device, updates: int, seconds: float
+    n_steps: int, width: int, seeds: int, *, device: torch.device, updates: int, seconds: float,
+    graphs: bool = False,
 ) -> dict[str, float]:
-    """The schedule of :func:`measure` for ``seeds`` seeds updated as one (seed axis)."""
+    """The schedule of :func:`measure` for ``seeds`` seeds updated as one (seed axis), eager
+    or replayed as CUDA graphs."""
     cfg = DIMEConfig(n_diffusion_steps=n_steps, critic_hidden=width, v_min=-200.0, v_max=200.0)
     agents = []
     for s in range(seeds):
@@ -168,15 +194,27 @@ def measure_seeds(
     rngs = [np.random.default_rng(s) for s in range(seeds)]
     buffers = [_filled_buffer(device, r) for r in rngs]
     gens = [torch.Generator(device=device).manual_seed(s) for s in range(seeds)]
+    indices = [torch.Generator(device=device).manual_seed(100 + s) for s in range(seeds)]
+    if device.type == "cpu":
+        indices = rngs
+    replay = GraphedUpdates(stack) if graphs else None
 
     def schedule(k: int) -> None:
         for i in range(1, k + 1):
-            parts = [b.sample(cfg.batch_size, r) for b, r in zip(buffers, rngs, strict=True)]
+            parts = [b.sample(cfg.batch_size, r) for b, r in zip(buffers, indices, strict=True)]
             batch = Batch(*[torch.stack(x) for x in zip(*parts, strict=True)])
-            stack.critic_update(batch, stack.noise(gens, cfg.batch_size))
+            noise = stack.noise(gens, cfg.batch_size)
+            if replay is None:
+                stack.critic_update(batch, noise)
+            else:
+                replay.critic_update(batch, noise)
             if i % cfg.policy_delay == 0:
-                stats = stack.actor_update(batch.obs, stack.noise(gens, cfg.batch_size))
-                stack.alpha_update(stats.running_cost)
+                noise = stack.noise(gens, cfg.batch_size)
+                if replay is None:
+                    stats = stack.actor_update(batch.obs, noise)
+                    stack.alpha_update(stats.running_cost)
+                else:
+                    replay.actor_alpha_update(batch.obs, noise)
         if device.type == "cuda":
             torch.cuda.synchronize(device)
 
@@ -236,7 +274,14 @@ def main() -> None:
     parser.add_argument(
         "--threads", type=int, default=0, help="torch CPU threads (0: physical cores)"
     )
-    parser.add_argument("--compile", action="store_true", help="torch.compile the updates")
+    parser.add_argument("--compile", action="store_true", help="also time torch.compile")
+    parser.add_argument(
+        "--graphs", action="store_true", help="also time CUDA-graph replay (CUDA devices only)"
+    )
+    parser.add_argument(
+        "--tf32", action="store_true",
+        help="let CUDA float32 matrix products use TF32 (a precision change; off in training)",
+    )  # fmt: skip
     parser.add_argument(
         "--seeds", type=int, default=0, help="also time S seeds in one process (seed axis)"
     )
@@ -260,48 +305,63 @@ def main() -> None:
 
     device = resolve_device(args.device)
     torch.set_num_threads(args.threads or physical_cores())
+    if (args.graphs or args.tf32) and device.type != "cuda":
+        parser.error(f"--graphs and --tf32 need a CUDA device, got {device}")
+    if args.tf32:
+        torch.backends.cuda.matmul.allow_tf32 = True
+        print("TF32 matrix products: float32 inputs rounded to 10-bit mantissas")
     print(
-        f"device {device}, torch {torch.__version__}, {torch.get_num_threads()} threads, "
-        f"obs {OBS_DIM}, act {ACT_DIM}, batch {BATCH}, compile={args.compile}"
+        f"device {device}"
+        + (f" ({torch.cuda.get_device_name(device)})" if device.type == "cuda" else "")
+        + f", torch {torch.__version__}, {torch.get_num_threads()} threads, "
+        f"obs {OBS_DIM}, act {ACT_DIM}, batch {BATCH}"
     )
+    modes = ["eager"] + (["compile"] if args.compile else []) + (["graphs"] if args.graphs else [])
     header = (
-        f"{'config':8s} {'critic/s':>9s} {'actor/s':>8s} {'ms/critic':>10s} {'ms/actor':>9s}"
-        f" | {'reference critic/s':>18s} {'actor/s':>8s}"
+        f"{'config':8s} {'mode':8s} {'critic/s':>9s} {'actor/s':>8s} {'ms/critic':>10s} "
+        f"{'ms/actor':>9s} {'x eager':>8s} | {'reference critic/s':>18s} {'actor/s':>8s}"
     )
     print(header)
     print("-" * len(header))
     for name in args.configs:
         n_steps, width, ref_critic, ref_actor = CONFIGS[name]
-        r = measure(
-            n_steps, width, device=device, updates=args.steps, seconds=args.seconds,
-            compile_updates=args.compile,
-        )  # fmt: skip
-        print(
-            f"{name:8s} {r['critic_per_s']:9.2f} {r['actor_per_s']:8.2f} "
-            f"{r['ms_per_critic_update']:10.1f} {r['ms_per_actor_update']:9.1f}"
-            f" | {ref_critic:18.1f} {ref_actor:8.1f}",
-            flush=True,
-        )
+        eager = None
+        for mode in modes:
+            r = measure(
+                n_steps, width, device=device, updates=args.steps, seconds=args.seconds,
+                compile_updates=mode == "compile", graphs=mode == "graphs",
+            )  # fmt: skip
+            eager = eager or r["critic_per_s"]
+            print(
+                f"{name:8s} {mode:8s} {r['critic_per_s']:9.2f} {r['actor_per_s']:8.2f} "
+                f"{r['ms_per_critic_update']:10.2f} {r['ms_per_actor_update']:9.2f} "
+                f"{r['critic_per_s'] / eager:8.2f} | {ref_critic:18.1f} {ref_actor:8.1f}",
+                flush=True,
+            )
     print("reference: official JAX implementation, 2-core AMD EPYC CPU, float32")
     if args.seeds > 0:
         print(f"\nseed axis: 1 and {args.seeds} seeds in one process (critic updates)")
-        head = (f"{'config':8s} {'seeds':>5s} {'per seed/s':>10s} {'aggregate/s':>11s} "
-                f"{'ms/update':>9s} {'x one seed':>10s}")  # fmt: skip
+        head = (f"{'config':8s} {'mode':8s} {'seeds':>5s} {'per seed/s':>10s} "
+                f"{'aggregate/s':>11s} {'ms/update':>9s} {'wall x 1 seed':>13s} "
+                f"{'aggregate x 1 seed':>18s}")  # fmt: skip
         print(head)
         print("-" * len(head))
         for name in args.configs:
             n_steps, width = CONFIGS[name][:2]
-            one = None
-            for s in sorted({1, args.seeds}):
-                r = measure_seeds(n_steps, width, s, device=device, updates=args.steps,
-                                  seconds=args.seconds)  # fmt: skip
-                one = one or r["ms_per_update"]
-                print(
-                    f"{name:8s} {s:5d} {r['critic_per_s_per_seed']:10.2f} "
-                    f"{r['critic_per_s']:11.2f} {r['ms_per_update']:9.1f} "
-                    f"{r['ms_per_update'] / one:10.2f}",
-                    flush=True,
-                )
+            for mode in [m for m in modes if m != "compile"]:
+                one = None
+                for s in sorted({1, args.seeds}):
+                    r = measure_seeds(n_steps, width, s, device=device, updates=args.steps,
+                                      seconds=args.seconds, graphs=mode == "graphs")  # fmt: skip
+                    one = one or r
+                    print(
+                        f"{name:8s} {mode:8s} {s:5d} {r['critic_per_s_per_seed']:10.2f} "
+                        f"{r['critic_per_s']:11.2f} {r['ms_per_update']:9.2f} "
+                        f"{r['ms_per_update'] / one['ms_per_update']:13.2f} "
+                        f"{r['critic_per_s'] / one['critic_per_s']:18.2f}",
+                        flush=True,
+                    )
+        print("'x 1 seed': against one seed through the same path and mode")
     _ = dataclasses  # keeps the import for readers extending the configs
 
 

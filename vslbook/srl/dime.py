@@ -47,6 +47,7 @@ from vslbook.budget import Budget
 from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
+from vslbook.srl.cuda_graphs import GraphedUpdates, graphs_wanted
 from vslbook.srl.dime_config import CrossQConfig, DIMEConfig, DIMEGaussianConfig
 from vslbook.srl.dime_updates import (
     Agent,
@@ -56,6 +57,7 @@ from vslbook.srl.dime_updates import (
     combine_q,
     critic_update,
     make_agent,
+    policy_noise,
     q_values,
     resolve_device,
 )
@@ -155,9 +157,14 @@ def act(
     obs: np.ndarray,
     device: torch.device,
     generator: torch.Generator | None = None,
+    graphs: GraphedUpdates | None = None,
 ) -> np.ndarray:
-    """One stochastic action in [-1, 1] for one observation (l. 3: the whole chain)."""
+    """One stochastic action in [-1, 1] for one observation (l. 3: the whole chain);
+    with ``graphs``, the chain is replayed as a CUDA graph (the same draws)."""
     obs_t = torch.as_tensor(obs, dtype=torch.float32, device=device).unsqueeze(0)
+    if graphs is not None:
+        noise = policy_noise(policy, 1, generator, device)
+        return graphs.act(obs_t, noise)[0].cpu().numpy()
     return policy.sample(obs_t, generator=generator).action[0].cpu().numpy()
 
 
@@ -169,6 +176,7 @@ def evaluate(
     index: int,
     episodes: int,
     device: torch.device,
+    graphs: GraphedUpdates | None = None,
 ) -> tuple[float, float | None]:
     """Mean return of ``episodes`` episodes with the stochastic policy, and the mean final
     ``info["success"]`` when the environment reports one (else None).
@@ -183,7 +191,7 @@ def evaluate(
         obs, info = env.reset(seed=_stream_seed(seed, EVAL_RESETS, index, episode))
         total, done = 0.0, False
         while not done:
-            action = act(policy, obs, device, generator)
+            action = act(policy, obs, device, generator, graphs)
             obs, reward, terminated, truncated, info = env.step(
                 _to_env_action(action, env.action_space)
             )
@@ -306,7 +314,8 @@ def train(
     buffer = ReplayBuffer(min(cfg.buffer_size, total_steps), obs_dim, act_dim, device)
     indices = replay_generator(cfg.replay_sampler, device, _stream_seed(seed, REPLAY_INDICES))
     critic_step, actor_step = critic_update, actor_update
-    if cfg.compile:
+    graphs = GraphedUpdates(agent) if graphs_wanted(cfg, device) else None
+    if cfg.compile and graphs is None:
         critic_step, actor_step = torch.compile(critic_update), torch.compile(actor_update)
     diag = _Means(device)
     watch = FiniteWatch(WATCHED, device)
@@ -352,14 +361,22 @@ def train(
         nonlocal n_updates
         for _ in range(cfg.utd):
             batch = buffer.sample(cfg.batch_size, rng if indices is None else indices)
-            critic_stats = critic_step(agent, batch)
+            if graphs is None:
+                critic_stats = critic_step(agent, batch)
+            else:  # the draws the eager step would make, from the same (global) stream
+                noise = policy_noise(agent.policy, cfg.batch_size, None, device)
+                critic_stats = graphs.critic_update(batch, noise)
             watch.add(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
             diag.add("critic_loss", critic_stats.loss)
             diag.add("q_mean", critic_stats.value)
             n_updates += 1
             if n_updates % cfg.policy_delay == 0:  # l. 8-10: actor (5.27) and α (5.28)
-                actor_stats = actor_step(agent, batch.obs)
-                alpha_loss = alpha_update(agent, actor_stats.running_cost)
+                if graphs is None:
+                    actor_stats = actor_step(agent, batch.obs)
+                    alpha_loss = alpha_update(agent, actor_stats.running_cost)
+                else:
+                    noise = policy_noise(agent.policy, cfg.batch_size, None, device)
+                    actor_stats, alpha_loss = graphs.actor_alpha_update(batch.obs, noise)
                 watch.add(
                     step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
                     alpha_loss=alpha_loss,
@@ -385,7 +402,7 @@ def train(
         if step < learning_starts:
             action = rng.uniform(-1.0, 1.0, size=act_dim).astype(np.float32)
         else:
-            action = act(agent.policy, obs, device)  # the one host sync of an env step
+            action = act(agent.policy, obs, device, graphs=graphs)  # the step's one host sync
             if not np.isfinite(action).all():  # a diverged update shows here first
                 watch.check()
                 raise DivergenceError(step + 1, "action", float(action[~np.isfinite(action)][0]))
@@ -410,7 +427,7 @@ def train(
             _require_finite_parameters(step, agent)
             eval_return, eval_success = evaluate(
                 agent.policy, eval_env, seed=seed, index=n_evals, episodes=eval_episodes,
-                device=device,
+                device=device, graphs=graphs,
             )  # fmt: skip
             n_evals += 1
             now = time.perf_counter()

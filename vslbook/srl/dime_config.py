@@ -21,6 +21,7 @@ from vslbook.srl.replay import REPLAY_SAMPLERS
 POLICIES = ("diffusion", "gaussian")
 CRITICS = ("distributional", "scalar")
 Q_REDUCTIONS = ("mean", "min")
+CUDA_GRAPH_MODES = ("auto", "on", "off")
 
 
 @dataclass(frozen=True)
@@ -83,6 +84,10 @@ class DIMEConfig:
             the device, no host-to-device copy in the update loop) or ``"auto"`` (numpy on
             a CPU, the device elsewhere). The two are different random streams.
         compile: wrap the update functions in ``torch.compile``.
+        cuda_graphs: replay the critic step, the actor + α step and the action sampler as
+            CUDA graphs (:mod:`vslbook.srl.cuda_graphs`): ``"auto"`` (on a CUDA device,
+            unless ``compile`` or ``use_target_network``), ``"on"`` (an error elsewhere) or
+            ``"off"``. The numbers are the eager updates' (same random stream).
         num_threads: torch CPU threads (0 leaves torch's default).
     """
 
@@ -127,6 +132,7 @@ class DIMEConfig:
     device: str = "auto"
     replay_sampler: str = "auto"
     compile: bool = False
+    cuda_graphs: str = "auto"
     num_threads: int = 0
 
     def __post_init__(self) -> None:
@@ -162,9 +168,20 @@ class DIMEConfig:
             ("critic", self.critic, CRITICS),
             ("q_reduce", self.q_reduce, Q_REDUCTIONS),
             ("replay_sampler", self.replay_sampler, REPLAY_SAMPLERS),
+            ("cuda_graphs", self.cuda_graphs, CUDA_GRAPH_MODES),
         ):
             if value not in allowed:
                 raise ValueError(f"unknown {name} {value!r}; expected one of {', '.join(allowed)}")
+        if self.cuda_graphs == "on" and self.compile:
+            raise ValueError(
+                "cuda_graphs='on' and compile=True are two ways to the same end; choose one "
+                "(cuda_graphs='auto' leaves the graphs to torch.compile)"
+            )
+        if self.cuda_graphs == "on" and self.use_target_network:
+            raise ValueError(
+                "cuda_graphs='on' needs use_target_network=False (the graphs hold CrossQ's "
+                "updates); use cuda_graphs='auto' or 'off' for the target-network ablation"
+            )
         if (self.v_min is None) != (self.v_max is None):
             raise ValueError(
                 f"set both v_min and v_max or neither, got v_min={self.v_min!r}, "
@@ -254,7 +271,7 @@ NAMED_CONFIGS: dict[str, dict[str, Any]] = {
 #: Fields that set how long or where a run goes, not what the algorithm is: a budget scales
 #: the counts, and the runtime fields do not change the numbers' meaning.
 COUNT_FIELDS = ("total_steps", "eval_every", "eval_episodes", "checkpoint_every")
-RUNTIME_FIELDS = ("device", "compile", "num_threads")
+RUNTIME_FIELDS = ("device", "compile", "cuda_graphs", "num_threads")
 
 #: Where each config class's defaults come from, for the captions.
 THESIS_TABLES = {

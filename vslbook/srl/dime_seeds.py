@@ -31,6 +31,7 @@ from vslbook.registry import config_from_record
 from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
 from vslbook.srl import dime
+from vslbook.srl.cuda_graphs import GraphedUpdates, graphs_wanted
 from vslbook.srl.dime_config import DIMEConfig
 from vslbook.srl.dime_updates import make_agent, resolve_device
 from vslbook.srl.divergence import WATCHED, FiniteWatch
@@ -56,7 +57,7 @@ class _Seed:
         self.v_range = (v_min, v_max)
         self.agent = make_agent(obs_dim, act_dim, cfg, v_min=v_min, v_max=v_max, device=device)
         self.generator = torch.Generator(device=device)
-        self.generator.set_state(torch.get_rng_state())  # the global stream after the init
+        self.generator.set_state(_global_rng(device))  # the global stream after the init
         total = budget.scale(cfg.total_steps)
         self.buffer = ReplayBuffer(min(cfg.buffer_size, total), obs_dim, act_dim, device)
         self.indices = replay_generator(
@@ -78,7 +79,7 @@ class _Seed:
             )
             self.last_eval = state["last_eval"]
             restore_rng_state(state["rng"], self.rng)
-            self.generator.set_state(torch.get_rng_state())
+            self.generator.set_state(_global_rng(device))
             if self.indices is not None:
                 self.indices.set_state(state["replay_indices"])
             self.actions = [np.asarray(a, np.float32) for a in state.get("episode_actions", [])]
@@ -93,12 +94,13 @@ class _Seed:
         return obs
 
     def checkpoint(self, stack: SeedStack, index: int, final: bool = False) -> None:
-        torch_state = torch.get_rng_state()
-        torch.set_rng_state(self.generator.get_state())  # the single-seed format: global RNG
+        device = self.generator.device
+        torch_state = _global_rng(device)
+        _set_global_rng(device, self.generator.get_state())  # the single-seed format
         try:
             rng = rng_state(self.rng)
         finally:
-            torch.set_rng_state(torch_state)
+            _set_global_rng(device, torch_state)
         self.run.save_checkpoint(
             {
                 "agent": stack.agent_state(index),
@@ -115,6 +117,21 @@ class _Seed:
                 "episode_return": self.episode_return,
             }
         )
+
+
+def _global_rng(device: torch.device) -> torch.Tensor:
+    """The state of torch's global stream that a single-seed run on ``device`` draws its
+    policy noise from (the CPU generator, or the device's default CUDA generator)."""
+    if device.type == "cuda":
+        return torch.cuda.get_rng_state(device)
+    return torch.get_rng_state()
+
+
+def _set_global_rng(device: torch.device, state: torch.Tensor) -> None:
+    if device.type == "cuda":
+        torch.cuda.set_rng_state(state, device)
+    else:
+        torch.set_rng_state(state)
 
 
 def train_seeds(
@@ -194,6 +211,15 @@ def _train_group(
     steps_this_call = 0
 
     watch = FiniteWatch(WATCHED, device, seeds=len(live))  # positions in `live`
+    use_graphs = graphs_wanted(cfg, device)
+    graphs: GraphedUpdates | None = None  # the stack's graphs (captured again after a drop)
+    eval_graphs = {id(s): GraphedUpdates(s.agent) for s in seeds} if use_graphs else {}
+
+    def graphed() -> GraphedUpdates | None:
+        nonlocal graphs
+        if use_graphs and (graphs is None or graphs.learner is not stack):
+            graphs = GraphedUpdates(stack)
+        return graphs
 
     def drop(errors: dict[int, DivergenceError]) -> None:
         """Mark the seeds at these positions in ``live`` FAILED and stack the others again."""
@@ -220,7 +246,9 @@ def _train_group(
             obs = torch.as_tensor(np.stack([s.obs for s in own]), dtype=torch.float32,
                                   device=device)  # fmt: skip
             noise = stack.noise([s.generator for s in own], 1)
-            actions = list(stack.act(obs, noise).cpu().numpy())  # the env step's host sync
+            g = graphed()
+            actions = stack.act(obs, noise) if g is None else g.act(obs, noise)
+            actions = list(actions.cpu().numpy())  # the env step's host sync
             bad = [pos for pos, a in enumerate(actions) if not np.isfinite(a).all()]
             if bad:  # a diverged seed shows here first: name its update if the watch saw it
                 errors = watch.failures()
@@ -255,7 +283,9 @@ def _train_group(
                 ]
                 batch = Batch(*[torch.stack(x) for x in zip(*batches, strict=True)])
                 noise = stack.noise([s.generator for s in own], cfg.batch_size)
-                critic_stats = stack.critic_update(batch, noise)
+                g = graphed()
+                critic_stats = (stack.critic_update(batch, noise) if g is None
+                                else g.critic_update(batch, noise))  # fmt: skip
                 for s in own:
                     s.updates += 1
                 watch.add(step, critic_loss=critic_stats.loss, q_mean=critic_stats.value)
@@ -264,8 +294,11 @@ def _train_group(
                     s.diag.add("q_mean", critic_stats.value[k])
                 if own[0].updates % cfg.policy_delay == 0:
                     noise = stack.noise([s.generator for s in own], cfg.batch_size)
-                    actor_stats = stack.actor_update(batch.obs, noise)
-                    alpha_loss = stack.alpha_update(actor_stats.running_cost)
+                    if g is None:
+                        actor_stats = stack.actor_update(batch.obs, noise)
+                        alpha_loss = stack.alpha_update(actor_stats.running_cost)
+                    else:
+                        actor_stats, alpha_loss = g.actor_alpha_update(batch.obs, noise)
                     watch.add(step, actor_loss=actor_stats.loss, entropy_bound=actor_stats.value,
                               alpha_loss=alpha_loss)  # fmt: skip
                     for k, s in enumerate(own):
@@ -294,7 +327,7 @@ def _train_group(
             for s in own:
                 ret, success = dime.evaluate(
                     s.agent.policy, s.eval_env, seed=s.seed, index=s.evals,
-                    episodes=eval_episodes, device=device,
+                    episodes=eval_episodes, device=device, graphs=eval_graphs.get(id(s)),
                 )  # fmt: skip
                 s.evals += 1
                 row = dime.eval_row(

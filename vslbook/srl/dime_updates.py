@@ -198,6 +198,25 @@ def q_values(agent: Agent, critic_out: Tensor) -> Tensor:
     return agent.support.mean(F.softmax(critic_out, dim=-1))
 
 
+def policy_noise(
+    policy: nn.Module, batch: int, generator: torch.Generator | None, device: torch.device
+) -> Tensor:
+    """The standard normals ``policy.sample`` would draw for ``batch`` states, drawn now.
+
+    Drawn from ``generator`` (None: the device's default generator) in the chunks the policy
+    draws them (the diffusion policy one (batch, act_dim) draw per step, x_N's first; the
+    Gaussian policy one), so passing the result as ``noise`` gives the very sample the eager
+    call ``policy.sample(obs, generator=generator)`` would have drawn.
+    """
+    shape = policy.noise_shape(batch)
+    if len(shape) == 3:
+        chunk = shape[1:]
+        return torch.stack(
+            [torch.randn(chunk, generator=generator, device=device) for _ in range(shape[0])]
+        )
+    return torch.randn(shape, generator=generator, device=device)
+
+
 class UpdateStats(NamedTuple):
     """Diagnostics of one update (0-d tensors, detached)."""
 
@@ -245,9 +264,10 @@ def critic_loss(agent: Any, batch: Batch, noise: Tensor | None = None) -> tuple[
     return loss, q_mean
 
 
-def critic_update(agent: Agent, batch: Batch) -> UpdateStats:
-    """One step on the critic loss (Algorithm 4, l. 7; Eq. 5.21 / 5.24, CrossQ joint batch)."""
-    loss, q_mean = critic_loss(agent, batch)
+def critic_update(agent: Agent, batch: Batch, noise: Tensor | None = None) -> UpdateStats:
+    """One step on the critic loss (Algorithm 4, l. 7; Eq. 5.21 / 5.24, CrossQ joint batch);
+    ``noise``: the policy's draws for a' (default: fresh, from torch's global stream)."""
+    loss, q_mean = critic_loss(agent, batch, noise)
     agent.critic_opt.zero_grad(set_to_none=True)
     loss.backward()
     agent.critic_opt.step()
@@ -273,17 +293,18 @@ def clean_actor_grads(params: list[Tensor], clip: float) -> None:
         nn.utils.clip_grad_value_(params, clip)
 
 
-def actor_update(agent: Agent, obs: Tensor) -> UpdateStats:
+def actor_update(agent: Agent, obs: Tensor, noise: Tensor | None = None) -> UpdateStats:
     """One step on Eq. 5.27, mean[α (running + terminal cost) - ½(Q1 + Q2)(s, a)] (l. 9).
 
-    The critics run in eval mode with ``requires_grad`` switched off, so no gradient is
-    computed for (or written into) their weights; only ∂Q/∂a reaches the policy.
+    ``noise``: the policy's draws for a ~ π(·|s) (default: fresh). The critics run in eval
+    mode with ``requires_grad`` switched off, so no gradient is computed for (or written
+    into) their weights; only ∂Q/∂a reaches the policy.
     """
     critic, cfg = agent.critic, agent.cfg
     critic.eval()
     critic.requires_grad_(False)
     try:
-        loss, sample = actor_loss(agent, obs)
+        loss, sample = actor_loss(agent, obs, noise)
         agent.actor_opt.zero_grad(set_to_none=True)
         loss.backward()
     finally:

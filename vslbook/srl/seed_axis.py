@@ -38,6 +38,7 @@ from vslbook.srl.dime_updates import (
     actor_loss,
     clean_actor_grads,
     critic_loss,
+    policy_noise,
 )
 from vslbook.srl.replay import Batch
 
@@ -180,17 +181,9 @@ class SeedStack:
         """
         if len(generators) != self.n_seeds:
             raise ValueError(f"need {self.n_seeds} generators, got {len(generators)}")
-        shape = self._template.policy.noise_shape(batch)
         device = self.log_alpha.device
-        per_seed = []
-        for g in generators:
-            if len(shape) == 3:
-                chunk = shape[1:]
-                draws = [torch.randn(chunk, generator=g, device=device) for _ in range(shape[0])]
-                per_seed.append(torch.stack(draws))
-            else:
-                per_seed.append(torch.randn(shape, generator=g, device=device))
-        return torch.stack(per_seed)
+        policy = self._template.policy
+        return torch.stack([policy_noise(policy, batch, g, device) for g in generators])
 
     def _call(self, fn: Any, params: dict, *args: Any) -> Any:
         """``fn(policy, critic, *args)`` for every seed, each with its own state."""
