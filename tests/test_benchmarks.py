@@ -58,3 +58,17 @@ def test_chapter4_run_sets_are_the_notebook_figures():
 
     assert list(RUN_SETS[4]) == list(FIGURES)
     assert list(RUN_SETS[3]) == ["planar", "beer-pong", "table-tennis", "reacher"]
+
+
+def test_seed_axis_layer_paths_compute_the_same_gradients():
+    """The batched-layer critic body of the seed-axis benchmark (baddbmm, per-seed
+    BatchRenorm statistics) gives each seed the gradients of its own module, as vmap does;
+    a wrong scale inside the batched BatchRenorm is detected."""
+    layers = _load("seed_axis_layers")
+    assert layers.check_same(16, 3) < 1e-5
+    renorm = layers.BatchedBody._renorm
+    layers.BatchedBody._renorm = lambda self, x, k: renorm(self, x, k) * 1.01
+    try:
+        assert layers.check_same(16, 3) > 1e-5
+    finally:
+        layers.BatchedBody._renorm = renorm
