@@ -1194,9 +1194,16 @@ plt.show()
 
 # Each run's last evaluation, IQM [95 % CI] over seeds, and the thesis's orderings at the
 # end of training (ours at this budget's counts; only 5LR is meant to show it at reduced).
+# An iteration's median wall time (sampling the episodes and the updates, one core each
+# where runs share the machine) is in parentheses.
+def score_line(r):
+    time = "" if np.isnan(r.s_per_iteration) else f" ({r.s_per_iteration:.2g} s/it.)"
+    return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}"
+
+
 for figure, (scores, verdicts) in finals.items():
     print(f"Fig. {figure} ({DR.METRIC[figure]}): " + "; ".join(
-        f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]" for r in scores.itertuples()))
+        score_line(r) for r in scores.itertuples()))
     for v in verdicts.itertuples():
         verdict = "as in the thesis" if v.as_in_thesis else "NOT as in the thesis"
         print(f"    thesis: {v.ahead} above {v.behind} — ours: {verdict}")
@@ -1230,8 +1237,7 @@ fig.tight_layout()
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
 scores, verdicts = DR.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
-print("final test success: " + "; ".join(
-    f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]" for r in scores.itertuples()))
+print("final test success: " + "; ".join(score_line(r) for r in scores.itertuples()))
 for v in verdicts.itertuples():
     print(f"    thesis: {v.ahead} above {v.behind} — ours: "
           f"{'as in the thesis' if v.as_in_thesis else 'NOT as in the thesis'}")

@@ -67,6 +67,13 @@ def test_final_scores_and_the_thesis_pairs(reacher_runs):
             for m, paths in reacher_runs.items()}  # fmt: skip
     scores, verdicts = D.final_scores("4.3c", reacher_runs, reps=50)
     assert list(scores["runs"]) == [1, 1, 1]  # one seed each: the IQM is that run's value
+    # the median of each run's logged iteration times, read here from the file
+    times = {m: np.median([json.loads(line)["iteration_seconds"]
+                           for line in (paths[0] / "metrics.jsonl").read_text().splitlines()
+                           if "iteration_seconds" in line])
+             for m, paths in reacher_runs.items()}  # fmt: skip
+    np.testing.assert_allclose(scores.set_index("method")["s_per_iteration"][list(times)],
+                               list(times.values()))  # fmt: skip
     np.testing.assert_allclose(scores.set_index("method")["iqm"][list(last)], list(last.values()))
     # PPO did not run: its pair is left out; the other two compare the last evaluations
     assert list(zip(verdicts["ahead"], verdicts["behind"], strict=True)) == [

@@ -223,7 +223,8 @@ def final_scores(
     """Each run's last evaluation of ``y``, aggregated per method, and the thesis's pairs.
 
     Returns (scores, verdicts): scores has one row per method (label, runs, iqm, ci_low,
-    ci_high: IQM with a 95 % stratified-bootstrap CI over seeds); verdicts one row per pair
+    ci_high: IQM with a 95 % stratified-bootstrap CI over seeds; s_per_iteration: the
+    median wall time of an iteration over its runs, NaN for PPO); verdicts one row per pair
     of :data:`THESIS_AHEAD` whose two methods both ran (ahead, behind, as_in_thesis: the
     first's IQM above the second's). Runs of different lengths (PPO on 5LR at ``reduced``)
     are compared at their own last evaluation.
@@ -236,19 +237,23 @@ def final_scores(
     unknown = sorted(set(runs) - set(LABELS))
     if unknown:
         raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(LABELS)}")
-    table = {}
+    table, seconds = {}, {}
     for method, paths in runs.items():
-        last = []
+        last, times = [], []
         for path in paths:
-            rows = [r for r in RunDir.open(path).metrics() if r.get(y) is not None]
+            metrics = RunDir.open(path).metrics()
+            rows = [r for r in metrics if r.get(y) is not None]
             if not rows:
                 raise ValueError(f"{path}: no {y!r} in metrics.jsonl")
             last.append(float(rows[-1][y]))
+            times += [r["iteration_seconds"] for r in metrics if "iteration_seconds" in r]
         table[method] = np.array(last)[:, None]
+        seconds[method] = float(np.median(times)) if times else float("nan")
     point, ci = stats.interval_estimates(table, reps=reps)
     scores = pd.DataFrame([
         {"method": m, "label": LABELS[m], "runs": len(table[m]), "iqm": float(point[m][0]),
-         "ci_low": float(ci[m][0, 0]), "ci_high": float(ci[m][1, 0])}
+         "ci_low": float(ci[m][0, 0]), "ci_high": float(ci[m][1, 0]),
+         "s_per_iteration": seconds[m]}
         for m in table
     ])  # fmt: skip
     verdicts = pd.DataFrame(
