@@ -1196,6 +1196,12 @@ plt.show()
 # end of training (ours at this budget's counts; only 5LR is meant to show it at reduced).
 # An iteration's median wall time (sampling the episodes and the updates, one core each
 # where runs share the machine) is in parentheses.
+def verdict(as_in_thesis):
+    if as_in_thesis is None:
+        return "tied (equal IQMs)"
+    return "as in the thesis" if as_in_thesis else "NOT as in the thesis"
+
+
 def score_line(r):
     time = "" if np.isnan(r.s_per_iteration) else f" ({r.s_per_iteration:.2g} s/it.)"
     return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}"
@@ -1205,8 +1211,7 @@ for figure, (scores, verdicts) in finals.items():
     print(f"Fig. {figure} ({DR.METRIC[figure]}): " + "; ".join(
         score_line(r) for r in scores.itertuples()))
     for v in verdicts.itertuples():
-        verdict = "as in the thesis" if v.as_in_thesis else "NOT as in the thesis"
-        print(f"    thesis: {v.ahead} above {v.behind} — ours: {verdict}")
+        print(f"    thesis: {v.ahead} above {v.behind} — ours: {verdict(v.as_in_thesis)}")
 
 # %% [markdown]
 # ## 9. Fig. 4.3b — the curriculum ablation on table tennis
@@ -1239,8 +1244,7 @@ plt.show()
 scores, verdicts = DR.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
 print("final test success: " + "; ".join(score_line(r) for r in scores.itertuples()))
 for v in verdicts.itertuples():
-    print(f"    thesis: {v.ahead} above {v.behind} — ours: "
-          f"{'as in the thesis' if v.as_in_thesis else 'NOT as in the thesis'}")
+    print(f"    thesis: {v.ahead} above {v.behind} — ours: {verdict(v.as_in_thesis)}")
 
 
 # %% [markdown]

@@ -80,6 +80,10 @@ def test_final_scores_and_the_thesis_pairs(reacher_runs):
         ("Di-SkilL", "BBRL"), ("Di-SkilL", "LinDi-SkilL")]  # fmt: skip
     assert list(verdicts["as_in_thesis"]) == [last["diskill"] > last["bbrl"],
                                               last["diskill"] > last["lindiskill"]]  # fmt: skip
+    # equal IQMs (here the same runs under two names) are a tie, not a verdict either way
+    _, tied = D.final_scores("4.3c", {"diskill": reacher_runs["bbrl"],
+                                      "bbrl": reacher_runs["bbrl"]}, reps=50)  # fmt: skip
+    assert list(tied["as_in_thesis"]) == [None]
     with pytest.raises(ValueError, match="unknown figure '4.9'"):
         D.final_scores("4.9", reacher_runs)
     with pytest.raises(ValueError, match="unknown method"):

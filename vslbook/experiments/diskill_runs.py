@@ -226,8 +226,9 @@ def final_scores(
     ci_high: IQM with a 95 % stratified-bootstrap CI over seeds; s_per_iteration: the
     median wall time of an iteration over its runs, NaN for PPO); verdicts one row per pair
     of :data:`THESIS_AHEAD` whose two methods both ran (ahead, behind, as_in_thesis: the
-    first's IQM above the second's). Runs of different lengths (PPO on 5LR at ``reduced``)
-    are compared at their own last evaluation.
+    first's IQM above the second's; None where the two are equal, e.g. both at 0 success).
+    Runs of different lengths (PPO on 5LR at ``reduced``) are compared at their own last
+    evaluation.
     """
     from vslbook import stats
     from vslbook.results import RunDir
@@ -257,7 +258,8 @@ def final_scores(
         for m in table
     ])  # fmt: skip
     verdicts = pd.DataFrame(
-        [{"ahead": LABELS[a], "behind": LABELS[b], "as_in_thesis": point[a][0] > point[b][0]}
+        [{"ahead": LABELS[a], "behind": LABELS[b],
+          "as_in_thesis": None if point[a][0] == point[b][0] else point[a][0] > point[b][0]}
          for a, b in THESIS_AHEAD[figure] if a in table and b in table],
         columns=["ahead", "behind", "as_in_thesis"],
     )  # fmt: skip
