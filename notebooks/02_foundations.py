@@ -37,12 +37,12 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 import numpy as np
 import torch
-from IPython.display import display
 from scipy.special import logsumexp, xlogy
 from scipy.stats import multivariate_normal, norm
 
 import vslbook
 from vslbook.bounds import foundations as F
+from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.dists import LinearGaussianMoE, condition_gaussian, gaussian_kl, gaussian_log_prob
 from vslbook.plots import learning_curve, method_color, save_figure, use_style
@@ -52,11 +52,6 @@ use_style()
 ROOT = Path(vslbook.__file__).resolve().parents[1]
 print(f"budget: {budget.name}  (set VSLBOOK_BUDGET=smoke|reduced|full)")
 
-
-def show(report):
-    """Display a CheckReport and stop the notebook if any of its checks failed."""
-    display(report)
-    return report.require()
 
 # %% [markdown]
 # ## 1. Episode-based vs step-based RL

@@ -50,6 +50,7 @@ import numpy as np
 from IPython.display import display
 
 import vslbook
+from vslbook.bounds import show
 from vslbook.bounds import svsl as S
 from vslbook.budget import get_budget
 from vslbook.plots import method_color, save_figure, use_style
@@ -57,12 +58,6 @@ from vslbook.plots import method_color, save_figure, use_style
 budget = get_budget()
 use_style()
 print(f"budget: {budget.name}  (set VSLBOOK_BUDGET=smoke|reduced|full)")
-
-
-def show(report):
-    """Display a CheckReport and stop the notebook if any of its checks failed."""
-    display(report)
-    return report.require()
 
 
 # %% [markdown]

@@ -64,18 +64,13 @@ from scipy.special import log_softmax
 
 import vslbook
 from vslbook.bounds import diskill as D
+from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.plots import method_color, save_figure, use_style
 
 budget = get_budget()
 use_style()
 print(f"budget: {budget.name}  (set VSLBOOK_BUDGET=smoke|reduced|full)")
-
-
-def show(report):
-    """Display a CheckReport and stop the notebook if any of its checks failed."""
-    display(report)
-    return report.require()
 
 
 # %% [markdown]

@@ -41,6 +41,7 @@ from IPython.display import display
 
 import vslbook
 from vslbook.bounds import dime as D
+from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.data import paper_curves
 from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
@@ -54,12 +55,6 @@ ROOT = Path(vslbook.__file__).resolve().parents[1]
 RUNS = ROOT / "runs"
 TABLES = ROOT / "data" / "results"
 print(f"budget: {budget.name} ({budget.seeds} seeds per configuration)")
-
-
-def show(report):
-    """Display a CheckReport and stop the notebook if any of its checks failed."""
-    display(report)
-    return report.require()
 
 
 # %% [markdown]

@@ -13,7 +13,7 @@ import pytest
 from scipy.special import softmax
 from scipy.stats import norm
 
-from vslbook.bounds import Check, CheckReport
+from vslbook.bounds import Check, CheckReport, show
 from vslbook.bounds import foundations as F
 from vslbook.dists import gaussian_kl
 
@@ -69,6 +69,18 @@ def test_report_collects_failures():
     with pytest.raises(AssertionError, match="1 check"):
         report.require()
     assert "demo" in str(report) and "demo" in report._repr_markdown_()
+
+
+def test_show_prints_outside_a_notebook_and_stops_on_a_failure(capsys):
+    good = CheckReport("fine", (Check("ok", "Eq. 1", 0, 0, 0),))
+    assert show(good) is good
+    assert "[PASS] ok (Eq. 1)" in capsys.readouterr().out
+    bad = CheckReport("broken", (Check("no", "Eq. 2", 1, 0, 0),))
+    with pytest.raises(AssertionError, match="broken: 1 check"):
+        show(bad)
+    assert "[FAIL] no (Eq. 2)" in capsys.readouterr().out  # shown before it stops
+    with pytest.raises(TypeError, match="CheckReport, got Check"):
+        show(good.checks[0])
 
 
 # ------------------------------------------------------------------- every check passes

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["Check", "CheckReport", "relative_tol"]
+__all__ = ["Check", "CheckReport", "relative_tol", "show"]
 
 _RELATIONS = ("==", "<=")
 
@@ -146,6 +146,23 @@ class CheckReport:
         return "\n".join(
             [f"**{self.title}**", "", *(f"- {check._repr_markdown_()}" for check in self.checks)]
         )
+
+
+def show(report: CheckReport) -> CheckReport:
+    """Display ``report`` (as Markdown in a notebook, as text elsewhere) and stop if a check
+    failed: what each notebook does with every report, so a failed check halts the book."""
+    if not isinstance(report, CheckReport):
+        raise TypeError(f"show expects a CheckReport, got {type(report).__name__}")
+    try:
+        from IPython import get_ipython
+        from IPython.display import display
+    except ImportError:  # a plain interpreter without IPython
+        get_ipython = None
+    if get_ipython is not None and get_ipython() is not None:
+        display(report)
+    else:
+        print(report)
+    return report.require()
 
 
 def relative_tol(*values: float, rtol: float = 1e-9) -> float:
