@@ -121,11 +121,15 @@
 # | `01_tasks` | every task built, a picture of each scene; about 15 s | the same |
 # | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; 10 s from scratch, its three runs included |
 # | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1 (30 of 60 experts), 3.2, 3.3, 3.5 (60 PPO updates), A.1, A.2 at reduced counts, 3 seeds: the run sets took 2 h 7 min of one core (planar reacher 23 min, beer pong 15 min, table tennis 20 min, 5-link reacher 69 min, with another job on the second core), then the notebook 30 s |
-# | `04_diskill` | every check; every Di-SkilL, BBRL, LinDi-SkilL and PPO run set at 2 iterations of 2 experts with 4 samples (PPO: one rollout, 5LR only); about 90 s on a busy machine | Fig. 4.2 / 4.3c at 10 % of the 5LR iterations (300) with its 10 experts and PPO at 5 % of its steps, the other tasks at 2 % with at most 5 experts, 3 seeds; the sets measured so far add up to about 7.7 h of one core (two jobs on the two cores): 5LR Di-SkilL 52 min, BBRL 27 min, LinDi-SkilL 48 min, PPO about 36 min a seed; box pushing Di-SkilL 35 min, BBRL about 55 min; mini golf Di-SkilL 21 min, BBRL 48 min; table tennis (4 variants) 37 min; hopper jump 21 min; table tennis hard 10 min (the README has each set). `benchmarks/erl_run_sets.py --chapter 4` times each figure's set |
-# | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`), eight Pendulum ablations, three point-mass runs; about 3 h from scratch, from per-run times |
+# | `04_diskill` | every check; every Di-SkilL, BBRL, LinDi-SkilL and PPO run set at 2 iterations of 2 experts with 4 samples (PPO: one rollout, 5LR only); about 90 s on a busy machine | Fig. 4.2 / 4.3c at 10 % of the 5LR iterations (300) with its 10 experts and PPO at 5 % of its steps, the other tasks at 2 % with at most 5 experts, 3 seeds; the run sets add up to about 10.3 h of one core (two jobs on the two cores): 5LR Di-SkilL 52 min, BBRL 27 min, LinDi-SkilL 48 min, PPO about 36 min a seed; box pushing Di-SkilL 35 min, BBRL about 55 min, LinDi-SkilL about 51 min, PPO about 26 min a seed; mini golf Di-SkilL 21 min, BBRL 48 min, LinDi-SkilL about 18 min; table tennis (4 variants) 37 min; hopper jump 21 min; table tennis hard 16 min (the README has each set), then the notebook 38 s. `benchmarks/erl_run_sets.py --chapter 4` times each figure's set |
+# | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`, the three seeds on one seed axis), eight Pendulum ablations, three point-mass runs; about 1 h 45 min from scratch on 2 cores (ablations 15 min and point mass 4 min measured, the cheetah set about 83 min from its measured update rate) |
 #
-# A second `make book` executes only the notebooks whose code changed (an execution cache
-# per budget) and every finished training run is reused from `runs/`.
+# In all, `make book` at `reduced` from a fresh clone is a night's run on this machine: the
+# Chapter 3 and 4 run sets are about 12.4 h of one core (measured as separate jobs, two at a
+# time on the two cores; a book build runs them one after another, each set's episodes
+# spread over both cores), Chapter 5 about 1 h 45 min of both cores, the notebooks and the
+# site a few minutes. A second `make book` executes only the notebooks whose code changed
+# (an execution cache per budget) and every finished training run is reused from `runs/`.
 
 # %%
 from vslbook.budget import BUDGETS, get_budget
