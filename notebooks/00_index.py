@@ -89,6 +89,12 @@
 # | [3.6](#eq-3-6) context-distribution bound | 3 §3 | the same for $\pi(c\mid o)$ | `test_bounds_svsl.py::test_context_objective_missing_responsibility_term_fails` |
 # | [3.7](#eq-3-7), A.5–A.7 weights, REPS | 3 §4 | bound on $\pi(o)$; the REPS update against the expected softmax | `test_bounds_svsl.py::test_weight_objective_maximiser_is_softmax` |
 # | MORE, contextual MORE | 3 §5 | MORE on a quadratic reward reaches the analytic optimum | `test_erl_more.py::test_more_reaches_analytic_optimum_with_large_eps` |
+# | [4.2](#eq-4-2)–[4.3](#eq-4-3), [B.1](#eq-B-1) curriculum objective | 4 §1 | Eq. B.1 term by term against Eq. 4.3 from the mixture densities (quadrature); the bound's gap is $\alpha\,\mathbb E[\mathrm{KL}_\theta]+(\beta-\alpha)\,\mathbb E[\mathrm{KL}_c]$ | `test_bounds_diskill.py::test_eq_b1_equals_a_monte_carlo_estimate_of_eq_4_3` |
+# | [4.4](#eq-4-4) expert bound | 4 §2 | bound below Eq. 4.3, tight at the old model; improvements carry over | `test_bounds_diskill.py::test_expert_objective_without_entropy_bonus_fails` |
+# | [4.5](#eq-4-5) context-distribution bound | 4 §2 | the same for the energies $\phi_o$; needs $\beta\ge\alpha$ | `test_bounds_diskill.py::test_beta_below_alpha_breaks_the_bound` |
+# | [4.6](#eq-4-6) energy-based $\pi(c\mid o)$, Bayes gating | 4 §3 | Monte-Carlo normaliser against quadrature in 1-D and 2-D; gating from batch-normalised categoricals | `test_bounds_diskill.py::test_normaliser_and_entropy_against_the_trapezoid_rule` |
+# | [4.7](#eq-4-7) trust-region projection | 4 §4 | KL within its bounds after projection, the identity inside | `test_erl_trpl.py::test_bounds_hold_on_random_gaussians`, `test_gradcheck_project_cov` |
+# | [4.8](#eq-4-8) sample form of the context objective | 4 §5 | Eq. 4.8 over samples of $p(c)$ against Eq. 4.5 by quadrature | `test_bounds_diskill.py::test_wrong_sample_objectives_fail` |
 # | [C.1](#eq-C-1)–[C.3](#eq-C-3), [5.15](#eq-5-15) entropy lower bound | 5 §1.2 | Monte-Carlo and closed-form $\ell\le\mathcal H$ on a linear-Gaussian chain; the gap equals the chains' KL | `test_bounds_dime.py::test_wrong_bound_estimator_fails` |
 # | [C.29](#eq-C-29)–[C.30](#eq-C-30) tanh correction | 5 §1.3 | squashed entropy by quadrature against $\ell$ plus the log-Jacobian | `test_srl_components.py::test_squash_adds_tanh_correction_to_running_cost` |
 # | [5.16](#eq-5-16)–[5.20](#eq-5-20), [C.11](#eq-C-11) the inference problem | 5 §1.4 | joint KL $=-\mathbb E[Q]-\ell+\log Z$; marginal KL below joint KL | `test_bounds_dime.py::test_check_passes` |
