@@ -1201,8 +1201,8 @@ def verdict(as_in_thesis):
     return "as in the thesis" if as_in_thesis else "NOT as in the thesis"
 
 
-def score_line(r):
-    time = "" if np.isnan(r.s_per_iteration) else f" ({r.s_per_iteration:.2g} s/it.)"
+def score_line(r, with_time=True):
+    time = "" if not with_time or np.isnan(r.s_per_iteration) else f" ({r.s_per_iteration:.2g} s/it.)"
     return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}"
 
 
@@ -1213,7 +1213,7 @@ for figure, (scores, verdicts) in finals.items():
         print(f"    thesis: {v.ahead} above {v.behind} — ours: {verdict(v.as_in_thesis)}")
     if figure in returns:
         print("    final test return: " + "; ".join(
-            f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]" for r in returns[figure].itertuples()))
+            score_line(r, with_time=False) for r in returns[figure].itertuples()))
 
 # %% [markdown]
 # **The test return of the success tasks** (not a figure of the thesis). A success curve
@@ -1232,7 +1232,8 @@ for ax, figure in zip(axes, succ, strict=True):
     # (untrained experts) are far below and would flatten the rest
     later = ret[ret["samples"] >= 0.25 * ret.groupby("method")["samples"].transform("max")]
     lo, hi = later["lo"].min(), later["hi"].max()
-    ax.set_ylim(lo - 0.15 * (hi - lo + 1e-6), hi + 0.15 * (hi - lo + 1e-6))
+    pad = 0.15 * (hi - lo) + 1e-6
+    ax.set_ylim(lo - pad, hi + pad)
     ax.set_title(f"{DR.FIGURES[figure][0]}: test return (the runs of Fig. {figure})", fontsize=9)
 fig.tight_layout()
 save_figure(fig, "fig-4-4-returns")
