@@ -13,7 +13,7 @@ from vslbook.results import RunDir
 def _tiny(**kw):
     base = dict(
         n_experts=3, iterations_per_expert=6, fine_tune_every=3, weight_iterations=4,
-        test_every=3, test_contexts=20,
+        test_every=3, test_contexts=20, delete_local_optima=False,
     )  # fmt: skip
     return svsl_config("planar-reacher", **(base | kw))
 
@@ -107,8 +107,11 @@ def test_responsibility_terms_are_bayes_rule(task):
     np.testing.assert_allclose(np.exp(log_resp), resp, rtol=1e-6, atol=1e-300)
 
 
-def test_deterministic_and_resumes_exactly(task):
-    cfg = _tiny()
+@pytest.mark.parametrize("line_13", [False, True])
+def test_deterministic_and_resumes_exactly(task, line_13):
+    # with line 13 and factor 1 the newest expert goes whenever it is worse than the others'
+    # mean; the split at 11 falls before the check after expert 2 (iteration 12)
+    cfg = _tiny(delete_local_optima=line_13, local_optimum_factor=1.0)
     rows_a, rows_b = [], []
     a = train(task, cfg, seed=4, callback=lambda i, m: rows_a.append((i, m)))
     half = train(task, cfg, seed=4, until=11, callback=lambda i, m: rows_b.append((i, m)))
@@ -151,6 +154,57 @@ def test_run_directory_resumes(tmp_path):
     assert rows(resumed) == rows(full)
 
 
+def test_line_13_deletes_the_newest_expert_by_the_authors_rule(task):
+    s = SVSL(task, _tiny(delete_local_optima=True), 0)
+    for _ in range(3):
+        s.add_expert()
+    n = s.config.buffer_size
+    s.buffers.theta[:] = np.arange(3)[:, None, None]  # tells the experts' buffers apart
+    s.buffers.ret[0], s.buffers.ret[1] = np.linspace(-0.5, -1.5, n), -3.0  # means -1, -3
+    before = {k: v.copy() for k, v in s.model.arrays().items()}
+    s.buffers.ret[2] = -9.9  # the others' mean is -2: -9.9 >= 5 * -2, kept
+    assert not s.delete_if_local_optimum() and s.model.n_experts == 3
+    s.buffers.ret[2] = -10.1  # below 5 * -2: a local optimum
+    assert s.delete_if_local_optimum()
+    assert s.model.n_experts == 2 and s.buffers.ret.shape == (2, n)
+    np.testing.assert_array_equal(s.buffers.theta[:, 0, 0], [0, 1])
+    for k in ("ctx_mean", "ctx_cov", "gain", "offset", "cov"):
+        np.testing.assert_array_equal(getattr(s.model, k), before[k][:2])
+    np.testing.assert_allclose(np.exp(s.model.log_w), [0.5, 0.5])
+    s.buffers.ret[0] = 2.0  # the others' mean is not negative: the rule deletes nothing
+    s.buffers.ret[1] = -1.0
+    assert not s.delete_if_local_optimum()
+    one = SVSL(task, _tiny(delete_local_optima=True), 0)
+    one.add_expert()
+    one.buffers.ret[0] = -100.0
+    assert not one.delete_if_local_optimum()  # nothing to compare with
+
+
+@pytest.mark.parametrize(("factor", "kept"), [(1e-9, 1), (1e9, 3)])
+def test_line_13_runs_after_each_expert_s_k_iterations(task, factor, kept):
+    """A tiny factor deletes every expert after the first (returns are costs); a huge none."""
+    cfg = _tiny(delete_local_optima=True, local_optimum_factor=factor, weight_iterations=0)
+    rows = {}
+    s = train(task, cfg, seed=7, callback=lambda i, m: rows.setdefault(i, m))
+    key = "deleted_local_optimum"
+    checked = {i: m[key] for i, m in rows.items() if key in m}
+    K = cfg.iterations_per_expert
+    assert sorted(checked) == [K, 2 * K, 3 * K]  # after each expert's K iterations
+    assert checked[K] == 0.0  # the first expert has nobody to be compared with
+    assert [checked[2 * K], checked[3 * K]] == [float(kept == 1)] * 2
+    assert s.model.n_experts == kept and s.iteration == cfg.total_iterations
+
+
+def test_line_13_is_off_only_for_beer_pong_and_table_tennis():
+    """A.2: "For the Beer Pong and Table Tennis task, we have disabled the deletion step"."""
+    on = [svsl_config("planar-reacher")] + [
+        svsl_config("reacher5-ch3", reward=r) for r in ("3.8", "3.9", "3.10")
+    ]
+    assert all(c.delete_local_optima and c.local_optimum_factor == 5.0 for c in on)
+    assert not svsl_config("beer-pong").delete_local_optima
+    assert not svsl_config("table-tennis-ch3").delete_local_optima
+
+
 @pytest.mark.slow
 def test_svsl_learns_the_planar_reacher(task):
     """Test return of the mixture rises well above the initial one (seed 0)."""
@@ -173,6 +227,8 @@ def test_bad_configuration(task):
         SVSL(task, svsl_config("planar-reacher", context_init_cov=(1.0,)), 0)
     with pytest.raises(ValueError, match="buffer_size"):
         svsl_config("planar-reacher", buffer_size=10)
+    with pytest.raises(ValueError, match="local_optimum_factor must be a positive number, got 0"):
+        svsl_config("planar-reacher", local_optimum_factor=0)
 
 
 def test_finished_run_made_by_other_code_is_redone(tmp_path, monkeypatch):
