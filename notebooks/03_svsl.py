@@ -449,8 +449,8 @@ plt.show()
 
 # %%
 scores = {v: [P.planar_scores(m) for m in ms] for v, ms in models.items()}
-keys = ["solved_rate", "collision_rate", "modes_per_context", "coverage"]
-fig, axes = plt.subplots(1, 4, figsize=(15, 2.6))
+keys = ["solved_rate", "collision_rate", "modes_per_context", "ways_per_context", "coverage"]
+fig, axes = plt.subplots(1, 5, figsize=(18, 2.6))
 for ax, key in zip(axes, keys, strict=True):
     table = {v: np.array([[s[key]] for s in rows]) for v, rows in scores.items()}
     point, ci = interval_estimates(table, reps=budget.bootstrap_reps)
@@ -468,7 +468,8 @@ iqm_of = {
 }  # fmt: skip
 with_r, without_r = P.VARIANTS[0], P.VARIANTS[1]
 for key, better in (("solved_rate", "higher"), ("collision_rate", "lower"),
-                    ("modes_per_context", "higher"), ("coverage", "higher")):  # fmt: skip
+                    ("modes_per_context", "higher"), ("ways_per_context", "higher"),
+                    ("coverage", "higher")):  # fmt: skip
     a, b = iqm_of[key][with_r], iqm_of[key][without_r]
     agrees = a > b if better == "higher" else a < b
     print(f"{key}: with {a:.3f}, without {b:.3f} -> the thesis expects {better} with the "

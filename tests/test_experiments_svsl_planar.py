@@ -7,6 +7,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
+from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points  # noqa: E402
 from vslbook.experiments import svsl_planar as P  # noqa: E402
 from vslbook.results import RunDir  # noqa: E402
 
@@ -62,3 +63,56 @@ def test_fig_3_1_from_the_command_line(tmp_path, monkeypatch):
     assert len(fig.axes) == 6
     assert "2 experts, K = 50 of 350, seed 0 of 1" in fig._suptitle.get_text()
     plt.close(fig)
+
+
+def test_distinct_solutions_groups_wrapped_angles_within_the_threshold():
+    a = np.zeros(10)
+    b = a.copy()
+    b[3] = 2 * np.pi + 0.2  # the same arm after wrapping, 0.2 rad away
+    c = a.copy()
+    c[:2] = 0.9  # sqrt(2) * 0.9 = 1.27 rad away
+    assert P.distinct_solutions(np.stack([a, b])) == 1
+    assert P.distinct_solutions(np.stack([a, b, c])) == 2
+    assert P.distinct_solutions(np.stack([a, c]), threshold=1.5) == 1
+
+
+def _x_monotone_arms(rng, n):
+    """Arms whose links all point rightwards and whose tips lie on y = 0 at x >= 4.5 (5
+    headings, then the same 5 negated in another order)."""
+    arms = []
+    while len(arms) < n:
+        first = rng.uniform(-1.35, 1.35, size=5)
+        heading = np.concatenate([first, -rng.permutation(first)])  # link directions
+        if np.cos(heading).sum() >= 4.5:
+            arms.append(np.diff(heading, prepend=0.0))  # relative joint angles θ
+    return np.array(arms)
+
+
+def _sides(theta):
+    """Above (True) or below each obstacle's centre where the arm passes its x, read off the
+    polyline (only for arms whose x grows along the chain)."""
+    pts = link_points(theta)
+    cx, cy = OBSTACLES[:, :2].mean(1), OBSTACLES[:, 2:].mean(1)
+    return tuple(bool(np.interp(x, pts[:, 0], pts[:, 1]) > y) for x, y in zip(cx, cy, strict=True))
+
+
+def test_ways_around_obstacles_are_the_sides_the_arms_pass_on():
+    """For arms that run left to right the way around the obstacles is the side (above or
+    below) of each obstacle centre: the count must be the number of side patterns."""
+    rng = np.random.default_rng(0)
+    checked = 0
+    for _ in range(40):
+        arms = _x_monotone_arms(rng, 6)
+        tips = np.array([link_points(t)[-1] for t in arms])
+        assert np.allclose(tips[:, 1], 0.0) and np.all(tips[:, 0] >= 4.5)
+        patterns = {_sides(t) for t in arms}
+        assert P.ways_around_obstacles(arms) == len(patterns)
+        # groups whose arms pass the middle obstacle on one side but differ elsewhere
+        checked += len(patterns) > len({p[0] for p in patterns})
+    assert checked >= 5  # (8 of the 40 groups with this seed)
+    over = np.diff([0.3] * 5 + [-0.3] * 5, prepend=0.0)  # above the middle obstacle
+    under = -over  # its mirror image: below it (and below the lower one)
+    bent = over + rng.normal(0.0, 0.01, size=10)
+    assert _sides(over) == _sides(bent) != _sides(under)
+    assert P.ways_around_obstacles(np.stack([over, bent])) == 1
+    assert P.ways_around_obstacles(np.stack([over, bent, under])) == 2

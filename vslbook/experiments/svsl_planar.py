@@ -40,12 +40,14 @@ from vslbook.results import RunDir
 __all__ = [
     "FIG_CONTEXTS",
     "VARIANTS",
+    "distinct_solutions",
     "draw_context_coverage",
     "draw_solutions",
     "load_model",
     "planar_counts",
     "planar_scores",
     "run_planar",
+    "ways_around_obstacles",
 ]
 
 #: The six target contexts drawn in Fig. 3.1. The thesis does not list their coordinates;
@@ -184,6 +186,32 @@ def distinct_solutions(thetas: np.ndarray, threshold: float = MODE_DISTANCE) -> 
     return len(centres)
 
 
+def ways_around_obstacles(thetas: np.ndarray) -> int:
+    """Number of different ways around the obstacles among solutions (n, 10) to one target.
+
+    A threshold-free reading of "modes" for this task: two collision-free arms that reach
+    the same target are the same way around the obstacles if one can be bent into the other
+    without crossing an obstacle (the same homotopy class of the plane without the three
+    rectangles). For each obstacle the angle the arm sweeps around the obstacle's centre,
+    from the base to the tip, tells the classes apart: arms of one class sweep nearly the
+    same angle (the tips differ a little), arms passing an obstacle on different sides
+    differ by about 2π. Two arms count as one way if every obstacle's angle differs by less
+    than π (greedy grouping, as :func:`distinct_solutions`). Meant for solving draws: an arm
+    that crosses an obstacle has no class.
+    """
+    pts = link_points(np.atleast_2d(np.asarray(thetas, dtype=np.float64)))  # (n, 11, 2)
+    centres = np.stack([OBSTACLES[:, :2].mean(1), OBSTACLES[:, 2:].mean(1)], axis=1)
+    rel = pts[:, :, None, :] - centres  # (n, 11, 3, 2)
+    heading = np.arctan2(rel[..., 1], rel[..., 0])
+    step = (np.diff(heading, axis=1) + np.pi) % (2 * np.pi) - np.pi  # each link: < π
+    swept = step.sum(axis=1)  # (n, 3)
+    classes: list[np.ndarray] = []
+    for a in swept:
+        if all(np.any(np.abs(a - c) >= np.pi) for c in classes):
+            classes.append(a)
+    return len(classes)
+
+
 def _context_gaussians(model: Any) -> tuple[np.ndarray, np.ndarray]:
     if isinstance(model, SVSL):
         return model.model.ctx_mean, model.model.ctx_cov
@@ -207,6 +235,9 @@ def planar_scores(
       pong (A.3.2.1: only successful solutions); ``experts_per_context``: distinct experts
       among all draws (experts that share one solution count once in the first and
       separately in the second);
+    * ``ways_per_context``: the different ways around the obstacles
+      (:func:`ways_around_obstacles`) among the same solving draws, a count of modes that
+      needs no distance threshold;
     * ``coverage``: the share of the contexts that lie within two standard deviations
       (Mahalanobis) of at least one expert's context distribution.
     """
@@ -218,6 +249,7 @@ def planar_scores(
     solved = (out.info["tip_distance"] <= SOLVED_TIP_DISTANCE) & (out.info["collision"] == 0)
     solved = solved.reshape(n_contexts, n_draws)
     modes = [distinct_solutions(t[k]) if k.any() else 0 for t, k in zip(th, solved, strict=True)]
+    ways = [ways_around_obstacles(t[k]) if k.any() else 0 for t, k in zip(th, solved, strict=True)]
     means, covs = _context_gaussians(model)
     diff = contexts[:, None, :] - means[None]
     maha = np.einsum("nei,eij,nej->ne", diff, np.linalg.inv(covs), diff)
@@ -227,6 +259,7 @@ def planar_scores(
         "mean_return": float(np.mean(out.returns)),
         "solved_rate": float(np.mean(solved)),
         "modes_per_context": float(np.mean(modes)),
+        "ways_per_context": float(np.mean(ways)),
         "experts_per_context": float(np.mean([len(np.unique(row)) for row in o])),
         "coverage": float(np.mean(np.min(maha, axis=1) <= 4.0)),
     }
