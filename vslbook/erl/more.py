@@ -19,24 +19,8 @@ and the multipliers (η, ω_d) minimise the convex dual
     g(η, ω_d) = η ε − ω_d H_min + (η+ω) log ∫ π_old^{η/(η+ω)} exp(R̃/(η+ω)),
     ∂g/∂η = ε − KL(π‖π_old),   ∂g/∂ω_d = H(π) − H_min.
 
-How the dual is solved (one vectorised loop over all E experts, no loop over experts).
-Each expert's dual is a smooth convex function of two variables with bounds
-η ∈ [1e-8, 1e8], ω_d ∈ [0, 1e8], and its Hessian has a closed form: with S = F⁻¹,
-δ = μ_old − μ, M = QS − I and λ = η + ω,
-
-    ∂²g/∂η² = (δᵀQSQδ + ½ tr M²)/λ,   ∂²g/∂η∂ω = −tr M/(2λ),   ∂²g/∂ω² = d/(2λ)
-
-(the dual is the perspective of a log-partition function, whose Hessian is a covariance of
-quadratic forms under the new Gaussian). We therefore run a projected Newton method
-(Bertsekas, 1982) with an Armijo line search, independently per expert but in lock-step as
-array operations. Compared with L-BFGS-B on the sum of the E duals this (i) converges in a
-few iterations to the tight tolerance that the constraint check needs, (ii) lets every
-expert backtrack on its own, so an η too small for a positive-definite ηQ + A (treated as
-g = +∞) only shortens that expert's step and never poisons the others' line searches, and
-(iii) stops each expert on its own KKT test. The dual value is evaluated in the
-cancellation-free form g = η(ε − KL) + ω_d(H − H_min) + (β/σ_R) H + E_π[R̃], which equals
-the expression above at the Lagrangian solution. The start is η = max(40, 2η_min + 1)
-(η_min: smallest η with ηQ + A ⪰ 0), ω_d = 0.
+The dual is solved for all experts at once by :func:`vslbook.erl.more_dual.newton_dual`
+(a projected Newton method with closed-form Hessians, explained in that module's docstring).
 
 Success per expert: KL ≤ ε(1 + 1e-3) and, when constrained, H ≥ H_min − 1e-6. An expert
 whose dual fails keeps its old distribution (success False, KL 0); nothing raises.
@@ -49,6 +33,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vslbook.erl.more_dual import (
+    DualEval,
+    chol_inverse,
+    cholesky_ok,
+    eta_min,
+    newton_dual,
+)
 from vslbook.erl.surrogate import (
     Quadratic,
     fit_quadratic,
@@ -70,8 +61,6 @@ __all__ = [
     "whitening_gaussian",
 ]
 
-ETA_BOUNDS = (1e-8, 1e8)
-OMEGA_MAX = 1e8
 LOG_2PI = float(np.log(2.0 * np.pi))
 
 
@@ -113,136 +102,6 @@ def gaussian_entropy(cov: np.ndarray) -> np.ndarray:
     """H[N(·, Σ)] = ½ (d log 2πe + log|Σ|), batched."""
     d = cov.shape[-1]
     return 0.5 * (d * (LOG_2PI + 1.0) + np.linalg.slogdet(cov)[1])
-
-
-# ----------------------------------------------------------------------------- helpers
-
-
-def _cholesky_ok(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Batched Cholesky of P; slots that are not (numerically) positive definite or not
-    finite get the identity and ok False, so one bad expert never stops the batch."""
-    ok = np.all(np.isfinite(P), axis=(-2, -1))
-    P = np.where(ok[:, None, None], P, np.eye(P.shape[-1]))
-    for _ in range(4):
-        try:
-            chol = np.linalg.cholesky(P)
-            diag = np.diagonal(chol, axis1=1, axis2=2)
-            good = np.all(diag > 1e-150, axis=1)
-            if np.all(good):
-                return chol, ok
-            ok &= good
-        except np.linalg.LinAlgError:
-            eig = np.linalg.eigvalsh(P)
-            ok &= eig[:, 0] > 1e-14 * np.abs(eig).max(axis=1)
-        P = np.where(ok[:, None, None], P, np.eye(P.shape[-1]))
-    raise FloatingPointError("batched Cholesky failed repeatedly")  # pragma: no cover
-
-
-def _chol_inverse(chol: np.ndarray) -> np.ndarray:
-    l_inv = np.linalg.inv(chol)
-    return np.swapaxes(l_inv, 1, 2) @ l_inv
-
-
-def _eta_min(cov_old: np.ndarray, A: np.ndarray) -> np.ndarray:
-    """Smallest η ≥ 0 with ηΣ_old⁻¹ + A ⪰ 0: −λ_min(LᵀA L) for Σ_old = L Lᵀ."""
-    chol = np.linalg.cholesky(cov_old)
-    return np.maximum(0.0, -np.linalg.eigvalsh(np.swapaxes(chol, 1, 2) @ A @ chol)[:, 0])
-
-
-@dataclass
-class _Eval:
-    """Dual value, gradient parts and Hessian at (η, ω_d) for a subset of experts."""
-
-    ok: np.ndarray
-    g: np.ndarray
-    kl: np.ndarray
-    ent: np.ndarray
-    hee: np.ndarray
-    heo: np.ndarray
-    hoo: np.ndarray
-    params: tuple[np.ndarray, ...]
-
-    def put(self, idx: np.ndarray, other: _Eval, sel: np.ndarray) -> None:
-        for name in ("ok", "g", "kl", "ent", "hee", "heo", "hoo"):
-            getattr(self, name)[idx] = getattr(other, name)[sel]
-        for mine, theirs in zip(self.params, other.params, strict=True):
-            mine[idx] = theirs[sel]
-
-
-def _newton_dual(
-    evaluate: Callable[[np.ndarray, np.ndarray, np.ndarray], _Eval],
-    eta0: np.ndarray,
-    eps: np.ndarray,
-    h_min: np.ndarray,
-    max_iter: int = 200,
-) -> tuple[np.ndarray, np.ndarray, _Eval]:
-    """Projected Newton on the E separable duals g(η, ω_d) at once (see module docstring).
-
-    h_min entries of −inf mark experts without entropy constraint (ω_d fixed at 0).
-    """
-    n_exp = len(eta0)
-    con = np.isfinite(h_min)
-    hm = np.where(con, h_min, 0.0)
-    eta = np.clip(eta0, *ETA_BOUNDS)
-    om = np.zeros(n_exp)
-    every = np.arange(n_exp)
-    cur = evaluate(every, eta, om)
-    for _ in range(8):  # make the start feasible (ηQ + A positive definite)
-        if np.all(cur.ok):
-            break
-        bad = np.flatnonzero(~cur.ok)
-        eta[bad] = np.minimum(eta[bad] * 10.0, ETA_BOUNDS[1])
-        cur.put(bad, evaluate(bad, eta[bad], om[bad]), np.arange(len(bad)))
-    stalled = ~cur.ok
-    for _ in range(max_iter):
-        ge = eps - cur.kl
-        go = np.where(con, cur.ent - hm, 0.0)
-        lo_e = (eta <= ETA_BOUNDS[0] * (1 + 1e-12)) & (ge > 0)
-        lo_o = ~con | ((om <= 0.0) & (go > 0))
-        conv_e = lo_e | (np.abs(ge) <= 1e-9 * eps)
-        conv_o = lo_o | (np.abs(go) <= 1e-9) | ((om >= OMEGA_MAX) & (go < 0))
-        active = ~(stalled | (conv_e & conv_o))
-        if not np.any(active):
-            break
-        # Newton direction on the free variables (active-set handling of the bounds)
-        hee = cur.hee * (1 + 1e-12) + 1e-300
-        hoo = cur.hoo * (1 + 1e-12) + 1e-300
-        det = hee * hoo - cur.heo**2
-        both = ~lo_e & ~lo_o & (det > 1e-12 * hee * hoo)
-        de = np.where(lo_e, 0.0, -ge / hee)
-        do = np.where(lo_o, 0.0, -go / hoo)
-        de = np.where(both, -(hoo * ge - cur.heo * go) / np.where(both, det, 1.0), de)
-        do = np.where(both, -(hee * go - cur.heo * ge) / np.where(both, det, 1.0), do)
-        # Armijo backtracking per expert along the projected path
-        alpha = np.ones(n_exp)
-        pending = active.copy()
-        for _ in range(60):
-            idx = np.flatnonzero(pending)
-            if len(idx) == 0:
-                break
-            eta_t = np.clip(eta[idx] + alpha[idx] * de[idx], *ETA_BOUNDS)
-            om_t = np.clip(om[idx] + alpha[idx] * do[idx], 0.0, OMEGA_MAX)
-            trial = evaluate(idx, eta_t, om_t)
-            step = ge[idx] * (eta_t - eta[idx]) + go[idx] * (om_t - om[idx])
-            g_old = cur.g[idx]
-            armijo = trial.g <= g_old + 1e-4 * step
-            # at round-off level the dual value cannot rank the points: use the gradient
-            flat = np.abs(trial.g - g_old) <= 1e-12 * (1.0 + np.abs(g_old))
-            pg_old = np.abs(ge[idx]) / eps[idx] + np.abs(go[idx])
-            go_t = np.where(con[idx], trial.ent - hm[idx], 0.0)
-            pg_new = np.abs(eps[idx] - trial.kl) / eps[idx] + np.abs(go_t)
-            acc = trial.ok & np.isfinite(trial.g) & (armijo | (flat & (pg_new < pg_old)))
-            moved = (eta_t != eta[idx]) | (om_t != om[idx])
-            acc &= moved
-            sel = np.flatnonzero(acc)
-            eta[idx[sel]], om[idx[sel]] = eta_t[sel], om_t[sel]
-            cur.put(idx[sel], trial, sel)
-            pending[idx[sel]] = False
-            alpha[idx[~acc]] *= 0.5
-            pending[idx[~moved]] = False
-            stalled[idx[~moved]] = True
-        stalled |= pending
-    return eta, om, cur
 
 
 def _check_eps_coef(eps, entropy_coef, n_exp: int) -> tuple[np.ndarray, np.ndarray]:
@@ -291,7 +150,7 @@ def _check_quad(quad: Quadratic, n_exp: int, d: int) -> None:
 # --------------------------------------------------------------------------- Eq. 3.6
 
 
-def _more_dual(mean, cov, A, a, beta, eps_arr, hmin) -> Callable[..., _Eval]:
+def _more_dual(mean, cov, A, a, beta, eps_arr, hmin) -> Callable[..., DualEval]:
     """Dual of Eq. 3.6 for all experts: evaluate(idx, η, ω_d) → value, gradient, Hessian."""
     d = mean.shape[1]
     Q = np.linalg.inv(cov)
@@ -299,10 +158,10 @@ def _more_dual(mean, cov, A, a, beta, eps_arr, hmin) -> Callable[..., _Eval]:
     logdet_old = np.linalg.slogdet(cov)[1]
     eye = np.eye(d)
 
-    def evaluate(idx: np.ndarray, eta: np.ndarray, om: np.ndarray) -> _Eval:
+    def evaluate(idx: np.ndarray, eta: np.ndarray, om: np.ndarray) -> DualEval:
         lam = eta + om + beta[idx]
-        chol, ok = _cholesky_ok(eta[:, None, None] * Q[idx] + A[idx])  # λF = ηQ + A
-        p_inv = _chol_inverse(chol)
+        chol, ok = cholesky_ok(eta[:, None, None] * Q[idx] + A[idx])  # λF = ηQ + A
+        p_inv = chol_inverse(chol)
         m = np.einsum("eij,ej->ei", p_inv, eta[:, None] * q[idx] + a[idx])
         S = lam[:, None, None] * p_inv
         logdet_s = d * np.log(lam) - 2.0 * np.log(np.diagonal(chol, axis1=1, axis2=2)).sum(1)
@@ -329,7 +188,7 @@ def _more_dual(mean, cov, A, a, beta, eps_arr, hmin) -> Callable[..., _Eval]:
         heo = -0.5 * np.trace(M, axis1=1, axis2=2) / lam
         hoo = 0.5 * d / lam
         g = np.where(ok, g, np.inf)
-        return _Eval(ok, g, kl, ent, hee, heo, hoo, (m, S))
+        return DualEval(ok, g, kl, ent, hee, heo, hoo, (m, S))
 
     return evaluate
 
@@ -367,8 +226,8 @@ def more_update(
     A, a = np.asarray(quad.A, dtype=np.float64), np.asarray(quad.a, dtype=np.float64)
     beta = coef / np.asarray(quad.scale, dtype=np.float64)  # entropy temperature in σ_R units
     evaluate = _more_dual(mean, cov, A, a, beta, eps_arr, hmin)
-    eta0 = np.maximum(40.0, 2.0 * _eta_min(cov, A) + 1.0)
-    eta, om, sol = _newton_dual(evaluate, eta0, eps_arr, hmin)
+    eta0 = np.maximum(40.0, 2.0 * eta_min(cov, A) + 1.0)
+    eta, om, sol = newton_dual(evaluate, eta0, eps_arr, hmin)
     success = sol.ok & np.isfinite(sol.kl) & (sol.kl <= eps_arr * (1 + 1e-3))
     success &= ~np.isfinite(hmin) | (sol.ent >= hmin - 1e-6)
     new_mean = np.where(success[:, None], sol.params[0], mean)
@@ -415,7 +274,7 @@ def _expect_bilinear(U, u, B, V, v, c1, c2) -> np.ndarray:
     )
 
 
-def _cmore_dual(K, k, cov, contexts, w, A, a, beta, eps_arr, hmin) -> Callable[..., _Eval]:
+def _cmore_dual(K, k, cov, contexts, w, A, a, beta, eps_arr, hmin) -> Callable[..., DualEval]:
     """Dual of Eq. 3.5 for all experts: evaluate(idx, η, ω_d) → value, gradient, Hessian."""
     dt, dc = K.shape[1:]
     A_tt, A_tc = A[:, dc:, dc:], A[:, dc:, :dc]
@@ -428,10 +287,10 @@ def _cmore_dual(K, k, cov, contexts, w, A, a, beta, eps_arr, hmin) -> Callable[.
     c_mean = np.einsum("en,eni->ei", w, contexts)
     c_second = np.swapaxes(contexts * w[..., None], 1, 2) @ contexts  # E_c[c cᵀ]
 
-    def evaluate(idx: np.ndarray, eta: np.ndarray, om: np.ndarray) -> _Eval:
+    def evaluate(idx: np.ndarray, eta: np.ndarray, om: np.ndarray) -> DualEval:
         lam = eta + om + beta[idx]
-        chol, ok = _cholesky_ok(eta[:, None, None] * Q[idx] + A_tt[idx])
-        p_inv = _chol_inverse(chol)
+        chol, ok = cholesky_ok(eta[:, None, None] * Q[idx] + A_tt[idx])
+        p_inv = chol_inverse(chol)
         K_new = p_inv @ (eta[:, None, None] * QK[idx] - A_tc[idx])
         k_new = np.einsum("eij,ej->ei", p_inv, eta[:, None] * Qk[idx] + a_t[idx])
         S = lam[:, None, None] * p_inv
@@ -463,7 +322,7 @@ def _cmore_dual(K, k, cov, contexts, w, A, a, beta, eps_arr, hmin) -> Callable[.
         heo = -0.5 * np.trace(M, axis1=1, axis2=2) / lam
         hoo = 0.5 * dt / lam
         g = np.where(ok, g, np.inf)
-        return _Eval(ok, g, kl, ent, hee, heo, hoo, (K_new, k_new, S))
+        return DualEval(ok, g, kl, ent, hee, heo, hoo, (K_new, k_new, S))
 
     return evaluate
 
@@ -512,8 +371,8 @@ def cmore_update(
     beta = coef / np.asarray(quad.scale, dtype=np.float64)  # entropy temperature in σ_R units
     evaluate = _cmore_dual(K, k, cov, contexts, w, A, a, beta, eps_arr, hmin)
     A_tt = A[:, dc:, dc:]
-    eta0 = np.maximum(40.0, 2.0 * _eta_min(cov, A_tt) + 1.0)
-    eta, om, sol = _newton_dual(evaluate, eta0, eps_arr, hmin)
+    eta0 = np.maximum(40.0, 2.0 * eta_min(cov, A_tt) + 1.0)
+    eta, om, sol = newton_dual(evaluate, eta0, eps_arr, hmin)
     success = sol.ok & np.isfinite(sol.kl) & (sol.kl <= eps_arr * (1 + 1e-3))
     success &= ~np.isfinite(hmin) | (sol.ent >= hmin - 1e-6)
     new_cov = np.where(success[:, None, None], sol.params[2], cov)
