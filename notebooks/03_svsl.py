@@ -471,6 +471,11 @@ for ax, key in zip(axes, keys, strict=True):
     interval_plot(ax, point, ci, xlabel=f"{key} (IQM, {counts['seeds']} seeds)")
     for v in P.VARIANTS:
         print(f"{key:>20} {v:>28}: {point[v][0]:.3f} [{ci[v][0, 0]:.3f}, {ci[v][1, 0]:.3f}]")
+fig.suptitle(
+    f"Fig. 3.1 scores (ours, budget {budget.name}: {counts['n_experts']} experts, "
+    f"{counts['seeds']} seeds; thesis: 60 experts, 15 seeds)",
+    fontsize=10,
+)
 fig.tight_layout()
 save_figure(fig, "fig-3-1-scores")
 plt.show()

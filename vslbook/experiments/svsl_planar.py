@@ -186,6 +186,9 @@ def distinct_solutions(thetas: np.ndarray, threshold: float = MODE_DISTANCE) -> 
     return len(centres)
 
 
+_OBSTACLE_CENTRES = np.stack([OBSTACLES[:, :2].mean(1), OBSTACLES[:, 2:].mean(1)], axis=1)
+
+
 def ways_around_obstacles(thetas: np.ndarray) -> int:
     """Number of different ways around the obstacles among solutions (n, 10) to one target.
 
@@ -200,8 +203,7 @@ def ways_around_obstacles(thetas: np.ndarray) -> int:
     that crosses an obstacle has no class.
     """
     pts = link_points(np.atleast_2d(np.asarray(thetas, dtype=np.float64)))  # (n, 11, 2)
-    centres = np.stack([OBSTACLES[:, :2].mean(1), OBSTACLES[:, 2:].mean(1)], axis=1)
-    rel = pts[:, :, None, :] - centres  # (n, 11, 3, 2)
+    rel = pts[:, :, None, :] - _OBSTACLE_CENTRES  # (n, 11, 3, 2)
     heading = np.arctan2(rel[..., 1], rel[..., 0])
     step = (np.diff(heading, axis=1) + np.pi) % (2 * np.pi) - np.pi  # each link: < π
     swept = step.sum(axis=1)  # (n, 3)
