@@ -116,3 +116,36 @@ def test_ways_around_obstacles_are_the_sides_the_arms_pass_on():
     assert _sides(over) == _sides(bent) != _sides(under)
     assert P.ways_around_obstacles(np.stack([over, bent])) == 1
     assert P.ways_around_obstacles(np.stack([over, bent, under])) == 2
+
+
+def test_scores_on_given_contexts_count_the_chosen_arms():
+    """planar_scores on given targets (the thesis's reading of Fig. 3.1: the six figure
+    contexts, 100 draws each): a model whose three experts play fixed arms in turn; two
+    arms pass the obstacles on the same sides, the third on other sides, all three reach
+    the first target and none the second."""
+    from types import SimpleNamespace
+
+    task = P.make_task("planar-reacher")
+    target = np.array([6.0, 0.0])
+    rng = np.random.default_rng(3)
+    found: dict[tuple, list] = {}
+    while len(found) < 2 or max(map(len, found.values())) < 2:
+        arm = _x_monotone_arms(rng, 1)[0]
+        out = task.evaluate(arm[None], target[None])
+        if out.info["tip_distance"][0] < 0.25 and out.info["collision"][0] == 0:
+            found.setdefault(_sides(arm), []).append(arm)
+    pair = next(a for a in found.values() if len(a) >= 2)[:2]
+    other = next(a for a in found.values() if not np.array_equal(a[0], pair[0]))[0]
+    arms = np.stack([*pair, other])
+    assert len({_sides(t) for t in arms}) == 2
+    means, covs = np.array([[6.0, 0.0]] * 3), np.eye(2)[None].repeat(3, 0)
+    mix = SimpleNamespace(K=np.zeros((3, 10, 2)), k=arms, ctx_mean=means, ctx_cov=covs)
+    model = SimpleNamespace(sample=lambda c, rng: (None, np.arange(len(c)) % 3), mix=mix)
+    far = np.array([5.0, 5.0])  # out of every arm's reach, 5.1 from the context means
+    s = P.planar_scores(model, contexts=np.stack([target, far]), n_draws=6)
+    assert s["solved_rate"] == 0.5 and s["collision_rate"] == 0.0
+    assert s["ways_per_context"] == 1.0  # (2 + 0) / 2
+    assert s["experts_per_context"] == 3.0
+    assert s["coverage"] == 0.5  # the target inside the 2σ circles, the far one not
+    with pytest.raises(ValueError, match=r"shape \(m, 2\), got \(2,\)"):
+        P.planar_scores(model, contexts=target)

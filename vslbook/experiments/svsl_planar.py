@@ -50,9 +50,10 @@ __all__ = [
     "ways_around_obstacles",
 ]
 
-#: The six target contexts drawn in Fig. 3.1. The thesis does not list their coordinates;
-#: these spread over the context box [4.5, 7] × [−6, 6] as the figure's red dots do.
-FIG_CONTEXTS = np.array([[5.0, 4.5], [6.5, 3.0], [5.5, 1.0], [6.5, -1.0], [5.0, -3.0], [6.5, -5.0]])
+#: The six target contexts drawn in Fig. 3.1 (its red dots). The thesis does not list their
+#: coordinates; these are the ones the authors' planar-reacher run script draws: x ∈ {5.5, 6.5}
+#: and y ∈ {−2, 0, 2}, the middle of the context box [4.5, 7] × [−6, 6].
+FIG_CONTEXTS = np.array([[5.5, 0.0], [6.5, 0.0], [5.5, -2.0], [6.5, -2.0], [5.5, 2.0], [6.5, 2.0]])
 
 #: The three methods of Fig. 3.1, in the order of its panels.
 VARIANTS = ("SVSL", "SVSL, no responsibilities", "HiREPS")
@@ -221,12 +222,18 @@ def _context_gaussians(model: Any) -> tuple[np.ndarray, np.ndarray]:
 
 
 def planar_scores(
-    model: Any, *, n_contexts: int = 200, n_draws: int = 20, seed: int = 0
+    model: Any,
+    *,
+    n_contexts: int = 200,
+    n_draws: int = 20,
+    seed: int = 0,
+    contexts: np.ndarray | None = None,
 ) -> dict[str, float]:
     """Precision, validity, versatility and coverage of a trained model on contexts from p(c).
 
-    For each of ``n_contexts`` contexts, ``n_draws`` experts are drawn from π(o | c) and their
-    means executed:
+    For each of ``n_contexts`` contexts drawn from p(c) (or each row of ``contexts``, e.g.
+    :data:`FIG_CONTEXTS` with ``n_draws=100``, the thesis's reading of Fig. 3.1), ``n_draws``
+    experts are drawn from π(o | c) and their means executed:
 
     * ``tip_distance``: mean ‖f(θ) − c‖ (precision); ``collision_rate`` (validity);
       ``mean_return``;
@@ -245,11 +252,15 @@ def planar_scores(
     """
     task = make_task("planar-reacher")
     rng = np.random.default_rng(seed)
-    contexts = task.sample_contexts(n_contexts, rng)
+    if contexts is None:
+        contexts = task.sample_contexts(n_contexts, rng)
+    contexts = np.asarray(contexts, dtype=np.float64)
+    if contexts.ndim != 2 or contexts.shape[1] != 2 or len(contexts) == 0:
+        raise ValueError(f"contexts must be targets of shape (m, 2), got {contexts.shape}")
     th, o = _sample_means(model, contexts, n_draws, rng)
     out = task.evaluate(th.reshape(-1, th.shape[-1]), np.repeat(contexts, n_draws, axis=0))
     solved = (out.info["tip_distance"] <= SOLVED_TIP_DISTANCE) & (out.info["collision"] == 0)
-    solved = solved.reshape(n_contexts, n_draws)
+    solved = solved.reshape(len(contexts), n_draws)
     modes = [distinct_solutions(t[k]) if k.any() else 0 for t, k in zip(th, solved, strict=True)]
     ways = [ways_around_obstacles(t[k]) if k.any() else 0 for t, k in zip(th, solved, strict=True)]
     means, covs = _context_gaussians(model)
