@@ -229,7 +229,7 @@ def planar_scores(
     seed: int = 0,
     contexts: np.ndarray | None = None,
 ) -> dict[str, float]:
-    """Precision, validity, versatility and coverage of a trained model on contexts from p(c).
+    """Precision, validity, versatility and coverage of a trained model on targets.
 
     For each of ``n_contexts`` contexts drawn from p(c) (or each row of ``contexts``, e.g.
     :data:`FIG_CONTEXTS` with ``n_draws=100``, the thesis's reading of Fig. 3.1), ``n_draws``
