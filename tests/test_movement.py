@@ -158,8 +158,10 @@ def test_prodmp_meets_initial_conditions_exactly() -> None:
     torch.testing.assert_close(pos[..., 0, :], y0, atol=1e-10, rtol=0)
     torch.testing.assert_close(vel[..., 0, :], dy0.expand(4, 5, 3), atol=1e-10, rtol=0)
 
-    # Velocities are the time derivative of positions (checked on a finer grid).
-    fine = ProDMP(n_basis=7, n_dof=3, duration=1.5, dt=0.001, tau=0.8)
+    # Velocities are the time derivative of positions (checked on a finer grid; the basis
+    # grid is made as fine too, since by default it is read by linear interpolation between
+    # points 0.01 s apart, as mp_pytorch does).
+    fine = ProDMP(n_basis=7, n_dof=3, duration=1.5, dt=0.001, tau=0.8, basis_dt=0.001)
     pos, vel = fine.trajectory(params[0], y0[0], dy0[0])
     central = (pos[..., 2:, :] - pos[..., :-2, :]) / (2 * fine.dt)
     assert (vel[..., 1:-1, :] - central).abs().max() < 1e-3 * vel.abs().max()
@@ -168,7 +170,7 @@ def test_prodmp_meets_initial_conditions_exactly() -> None:
 def test_prodmp_matches_dmp_integration() -> None:
     gen = torch.Generator().manual_seed(5)
     kwargs = dict(n_basis=8, n_dof=2, duration=1.2, dt=0.01, alpha=30.0, tau=0.9, alpha_x=2.5)
-    prodmp = ProDMP(**kwargs)
+    prodmp = ProDMP(**kwargs, basis_dt=0.001)  # a fine basis grid: its own error stays small
     w = 150.0 * torch.randn(6, 16, generator=gen, dtype=torch.float64)
     goal = torch.randn(6, 2, generator=gen, dtype=torch.float64)
     y0 = torch.randn(6, 2, generator=gen, dtype=torch.float64)
@@ -210,9 +212,11 @@ def test_prodmp_basis_matrix() -> None:
     prodmp = ProDMP(n_basis=4, n_dof=1)
     phi, dphi = prodmp.basis_matrix(), prodmp.basis_matrix(derivative=True)
     assert phi.shape == dphi.shape == (101, 5)
-    torch.testing.assert_close(phi[:, -1], torch.ones(101, dtype=torch.float64))
-    torch.testing.assert_close(dphi[:, -1], torch.zeros(101, dtype=torch.float64))
-    assert phi[0, :-1].abs().max() == 0 and dphi[0, :-1].abs().max() == 0
+    # the goal's column starts at rest at zero: 1 - (1 + a s) exp(-a s), a = alpha / 2 (Eq. P2)
+    a, s = 12.5, prodmp.times
+    torch.testing.assert_close(phi[:, -1], 1 - (1 + a * s) * torch.exp(-a * s))
+    torch.testing.assert_close(dphi[:, -1], a**2 * s * torch.exp(-a * s))
+    assert phi[0].abs().max() == 0 and dphi[0].abs().max() == 0
 
 
 def test_gradients_flow_to_parameters() -> None:
@@ -245,12 +249,21 @@ def test_float32_dtype() -> None:
         (dict(n_basis=3, n_dof=1, duration=-1.0), r"duration must be a finite positive .* -1.0"),
         (dict(n_basis=3, n_dof=1, dt=float("nan")), r"dt must be a finite positive .* nan"),
         (dict(n_basis=3, n_dof=1, dt=2.0), r"dt must not exceed duration=1.0, got dt=2.0"),
-        (dict(n_basis=3, n_dof=1, width=-0.1), r"width must be a finite positive .* -0.1"),
     ],
 )
 def test_constructors_reject_bad_input(cls: type, kwargs: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         cls(**kwargs)
+
+
+def test_basis_widths_reject_bad_values() -> None:
+    with pytest.raises(ValueError, match=r"width must be a finite positive .* -0.1"):
+        ProMP(3, 1, width=-0.1)
+    for cls in (DMP, ProDMP):
+        with pytest.raises(ValueError, match=r"bandwidth_factor must be a finite positive .* -0.1"):
+            cls(3, 1, bandwidth_factor=-0.1)
+        with pytest.raises(ValueError, match=r"rule must be one of .*, got 'fancy'"):
+            cls(3, 1, rule="fancy")
 
 
 @pytest.mark.parametrize("cls", [DMP, ProDMP])
@@ -260,7 +273,7 @@ def test_constructors_reject_bad_input(cls: type, kwargs: dict, match: str) -> N
         (dict(alpha=0.0), r"alpha must be a finite positive number, got 0.0"),
         (dict(tau=-2.0), r"tau must be a finite positive number, got -2.0"),
         (dict(alpha_x=float("inf")), r"alpha_x must be a finite positive number, got inf"),
-        (dict(substeps=0), r"substeps must be an integer >= 1, got 0"),
+        (dict(bandwidth_factor=0), r"bandwidth_factor must be a finite positive number, got 0"),
     ],
 )
 def test_dynamic_primitives_reject_bad_constants(cls: type, kwargs: dict, match: str) -> None:
@@ -268,14 +281,19 @@ def test_dynamic_primitives_reject_bad_constants(cls: type, kwargs: dict, match:
         cls(n_basis=3, n_dof=2, **kwargs)
 
 
-def test_dmp_rejects_bad_beta() -> None:
+def test_dmp_rejects_bad_beta_and_substeps() -> None:
     with pytest.raises(ValueError, match=r"beta must be a finite positive number, got -1.0"):
         DMP(3, 2, beta=-1.0)
+    with pytest.raises(ValueError, match=r"substeps must be an integer >= 1, got 0"):
+        DMP(3, 2, substeps=0)
 
 
-def test_prodmp_rejects_overflowing_horizon() -> None:
-    with pytest.raises(ValueError, match=r"alpha \* duration / \(2 tau\) must be at most 600"):
+def test_prodmp_rejects_a_horizon_beyond_its_basis_grid() -> None:
+    # the basis grid covers (t - delay) / tau in [0, 6] (mp_pytorch's length factor)
+    with pytest.raises(ValueError, match=r"scaled time \(t - delay\) / tau must lie in \[0, 6\]"):
         ProDMP(3, 1, duration=100.0, dt=0.5)
+    with pytest.raises(ValueError, match=r"delay must be a finite number >= 0, got -0.1"):
+        ProDMP(3, 1, delay=-0.1)
 
 
 def test_promp_rejects_bad_shapes() -> None:

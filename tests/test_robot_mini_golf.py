@@ -15,6 +15,7 @@ from vslbook.envs.robot.mini_golf import (
     Q0,
     TORQUE_MAX,
     MiniGolf,
+    Trace,
     final_reward,
     invalid_penalty,
     step_cost,
@@ -33,10 +34,10 @@ BALL_AT_CLUB = np.array([0.44, 0.6095, 0.0063])
 # 0.525). The first population of 40 already held it. Rounded to 6 decimals.
 CTX_PASS = np.array([0.3, -0.5, 0.44, 0.525])
 THETA_PASS = np.array([
-    1.42624, -0.263785, -0.558085, -0.093237, -0.894921, -1.035395, -0.961823, 1.061933,
-    1.530684, -1.582639, 0.358842, 1.182311, -1.622628, -0.75385, -1.557096, -1.936543,
-    0.152794, -1.104199, 0.946694, -0.044133, 0.618941, -0.438424, -0.952496, -0.13601,
-    -0.007494, -1.058783, 0.639893, 1.119892, 0.237124,
+    1.412648, -0.697413, -0.47867, -0.48046, -0.748003, -1.721859, -0.212927, 1.487021,
+    1.3175, -1.251709, 1.06103, 0.174545, -1.68043, -1.602168, -2.241059, -1.492407,
+    0.136616, -0.712911, 0.804888, 0.305455, 0.527284, -0.997824, -0.844455, -0.389246,
+    0.016353, -0.862963, 0.924912, 0.947544, 0.27086,
 ])  # fmt: skip
 Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 Q_MIN = np.array([-2.8973, -1.7628, -2.8973, -3.0718, -2.8973, -0.0175, -2.8973])
@@ -152,6 +153,7 @@ def test_invalid_theta_penalised_not_simulated(task: MiniGolf) -> None:
     th[0] = 1.0
     th[1 + 3 * 4 : 1 + 4 * 4] = 60.0  # joint 4 pushed above its upper limit (-0.0698)
     q_d, _ = task.mp.trajectory(th, Q0)
+    q_d = q_d[1:]  # row 0 is the start; control step k tracks row k + 1
     hi = float(np.mean(np.maximum(q_d - Q_MAX, 0.0)))
     lo = float(np.mean(np.maximum(Q_MIN - q_d, 0.0)))
     assert hi > 0
@@ -185,17 +187,81 @@ def test_ball_aimed_at_a_wall_does_not_pass(task: MiniGolf) -> None:
     tr = _push(task, BALL_AT_CLUB, aim=0.65)
     assert tr.hit and not tr.passed
     assert tr.ball[:, 1].min() > -0.725  # bounced off the goal wall
-    # third case (thesis), computed from the recorded ball positions by hand
+    # third case, computed from the recorded ball positions by hand: the authors' code
+    # (the default) ...
     goal = np.array([0.55, -0.7, 0.005])
     d_goal = np.min(np.sqrt(np.sum((tr.ball - goal) ** 2, axis=1)))
     y_min = tr.ball[:, 1].min()
-    expected = 2 - 2 * math.tanh(d_goal) - math.tanh(abs(y_min + 0.75))
+    expected = 2 - 2 * math.tanh(d_goal) + 0.5 * (1 - math.tanh(y_min + 0.75))
+    assert task.reward == "code"
     assert task.trace_return(tr) == pytest.approx(_costs(tr.torque) + expected, rel=1e-12)
-    code = MiniGolf(reward="code")
-    tr_code = _push(code, BALL_AT_CLUB, aim=0.65)
-    np.testing.assert_array_equal(tr_code.ball, tr.ball)
-    expected_code = 2 - 2 * math.tanh(d_goal) + 0.5 * (1 - math.tanh(y_min + 0.75))
-    assert code.trace_return(tr_code) == pytest.approx(_costs(tr.torque) + expected_code, rel=1e-12)
+    # ... and B.4.4's printed form
+    thesis = MiniGolf(reward="thesis")
+    tr_thesis = _push(thesis, BALL_AT_CLUB, aim=0.65)
+    np.testing.assert_array_equal(tr_thesis.ball, tr.ball)
+    expected_thesis = 2 - 2 * math.tanh(d_goal) - math.tanh(abs(y_min + 0.75))
+    assert thesis.trace_return(tr_thesis) == pytest.approx(
+        _costs(tr.torque) + expected_thesis, rel=1e-12
+    )
+
+
+def _resting_trace(hit: bool, tip_y: float = 0.65) -> Trace:
+    """A whole episode with the ball resting at its start (0.44, 0.5, 0.005), the robot still
+    (no torque) and the club tip at (0.44, tip_y, 0.005), goal at (0.55, −0.7, 0.005)."""
+    n = HORIZON * 10
+    return Trace(
+        ball=np.tile([0.44, 0.5, 0.005], (n, 1)), rod_tip=np.tile([0.44, tip_y, 0.005], (n, 1)),
+        torque=np.zeros((HORIZON, 7)), goal=np.array([0.55, -0.7, 0.005]), hit=hit,
+        passed=False, unstable=False, steps=HORIZON,
+    )  # fmt: skip
+
+
+def test_touched_ball_that_stays_put_ranks_above_a_miss_only_under_the_code_reward() -> None:
+    code, thesis = MiniGolf(), MiniGolf(reward="thesis")
+    assert code.reward == "code"
+    touched, missed = _resting_trace(hit=True), _resting_trace(hit=False)
+    # B.4.4's cases 2 and 3 with the numbers of these traces, by hand: ‖p_b − p_g‖ =
+    # √(0.11² + 1.2²), y_b + 0.75 = 1.25, club 0.15 m from the ball
+    d_goal = math.sqrt(0.11**2 + 1.2**2)
+    miss = 0.2 - 0.2 * math.tanh(0.15)  # 0.1702
+    hit_code = 2 - 2 * math.tanh(d_goal) + 0.5 * (1 - math.tanh(1.25))  # 0.4055
+    hit_thesis = 2 - 2 * math.tanh(d_goal) - math.tanh(1.25)  # −0.5186
+    assert (miss, hit_code, hit_thesis) == pytest.approx((0.17022, 0.40549, -0.51865), abs=5e-5)
+    assert code.trace_return(touched) == pytest.approx(hit_code, rel=1e-12)
+    assert thesis.trace_return(touched) == pytest.approx(hit_thesis, rel=1e-12)
+    for t in (code, thesis):  # a miss scores the same under both
+        assert t.trace_return(missed) == pytest.approx(miss, rel=1e-12)
+    assert code.trace_return(touched) > miss > thesis.trace_return(touched)
+    # The same in the simulator: the still robot's club head grazes a ball placed against it
+    # at y = 0.60815 (a hit that moves the ball < 1 mm; 0.05 mm farther from the club head
+    # there is no contact, 0.05 mm deeper the contact pushes it 1 cm) vs the ball at its
+    # start (a miss).
+    ball = np.array([0.44, 0.60815, 0.0063])
+    tr = code.simulate(*_still(), CTX, ball_pos=ball, ball_vel=[0.0, 0.0, 0.0])
+    assert tr.hit and not tr.passed and np.abs(tr.ball - ball).max() < 1e-3
+    d_goal = np.min(np.linalg.norm(tr.ball - [0.55, -0.7, 0.005], axis=1))
+    y_min = tr.ball[:, 1].min()
+    want_code = 2 - 2 * math.tanh(d_goal) + 0.5 * (1 - math.tanh(y_min + 0.75))
+    want_thesis = 2 - 2 * math.tanh(d_goal) - math.tanh(abs(y_min + 0.75))
+    got_code, got_thesis = code.trace_return(tr), thesis.trace_return(tr)
+    assert got_code == pytest.approx(_costs(tr.torque) + want_code, rel=1e-12)
+    assert got_thesis == pytest.approx(_costs(tr.torque) + want_thesis, rel=1e-12)
+    tr_miss = code.simulate(*_still(), CTX)
+    assert not tr_miss.hit
+    d_tip = np.min(np.linalg.norm(tr_miss.ball - tr_miss.rod_tip, axis=1))
+    got_miss = code.trace_return(tr_miss)
+    assert got_miss == pytest.approx(_costs(tr_miss.torque) + 0.2 - 0.2 * math.tanh(d_tip))
+    assert got_code > got_miss > got_thesis
+    assert (got_code, got_miss, got_thesis) == pytest.approx((0.33, 0.17, -0.61), abs=0.01)
+
+
+def test_unknown_reward_is_rejected() -> None:
+    with pytest.raises(ValueError, match=r"reward must be one of 'code', 'thesis', got 'dense'"):
+        MiniGolf(reward="dense")
+    from vslbook.envs.robot import make_task
+
+    assert make_task("mini-golf", reward="thesis").reward == "thesis"
+    assert make_task("mini-golf").reward == "code"
 
 
 def test_ball_through_the_gap_without_a_hit_is_no_success(task: MiniGolf) -> None:
@@ -213,11 +279,18 @@ def test_reward_terms_by_hand() -> None:
     assert step_cost(np.array([1.0, -2.0, 0, 0, 0, 0, 3.0])) == pytest.approx(-0.0005 * 14)
     assert final_reward(False, False, 0.5, 9.0, 9.0) == pytest.approx(0.2 - 0.2 * math.tanh(0.5))
     assert final_reward(False, True, 0.0, 9.0, 9.0) == pytest.approx(0.2)  # no hit, no bonus
-    assert final_reward(True, False, 9.0, 0.3, -0.6) == pytest.approx(
+    assert final_reward(True, False, 9.0, 0.3, -0.6) == pytest.approx(  # the code's, default
+        2 - 2 * math.tanh(0.3) + 0.5 - 0.5 * math.tanh(0.15)
+    )
+    assert final_reward(True, False, 9.0, 0.3, -0.6, "thesis") == pytest.approx(
         2 - 2 * math.tanh(0.3) - math.tanh(0.15)
     )
-    assert final_reward(True, False, 9.0, 0.3, -0.6, "code") == pytest.approx(
-        2 - 2 * math.tanh(0.3) + 0.5 - 0.5 * math.tanh(0.15)
+    # below the threshold the code's term exceeds 0.5 (no absolute value), the thesis's not
+    assert final_reward(True, False, 9.0, 0.3, -0.8) == pytest.approx(
+        2 - 2 * math.tanh(0.3) + 0.5 + 0.5 * math.tanh(0.05)
+    )
+    assert final_reward(True, False, 9.0, 0.3, -0.8, "thesis") == pytest.approx(
+        2 - 2 * math.tanh(0.3) - math.tanh(0.05)
     )
     assert final_reward(True, True, 9.0, 9.0, 9.0) == 6.0
     with pytest.raises(ValueError, match="variant"):

@@ -227,7 +227,9 @@ def test_constructed_solutions_score_far_better_than_random():
     # 5LR with the code's goal parameters: ProDMP goal = inverse kinematics, no weights.
     goal = np.array([-0.3, -0.2])
     task = Reacher5(goal_params=True)
-    th = np.r_[np.zeros(25), (ik(goal, np.full(5, -0.5)) - Q0_RIGHT) / 0.3]
+    # mp_pytorch's layout: per joint [w_1 .. w_5, g]
+    g = (ik(goal, np.full(5, -0.5)) - Q0_RIGHT) / 0.3
+    th = np.column_stack([np.zeros((5, 5)), g]).ravel()
     good = task.evaluate(th, goal, workers=1)
     rand = task.evaluate(rng.normal(size=(8, 30)), goal, workers=1)
     assert good.info["tip_distance"][0] < 0.01 and good.returns[0] > -1
@@ -262,7 +264,10 @@ def test_5lr_thesis_parameters_quick_optimiser():
     rand = task.evaluate(rng.normal(size=(8, 25)), goal, workers=1)
     still = -200 * np.hypot(0.51 - 0.35, 0.25)  # θ = 0: the arm stays straight
     assert task.evaluate(np.zeros(25), goal, workers=1).returns[0] == pytest.approx(still)
-    assert best.info["tip_distance"][0] < 0.15 and best.returns[0] > still + 15
+    # Without goal parameters the ProDMP returns towards its start posture once the forcing
+    # has decayed (x = e^-8 at 4 s); with mp_pytorch's phase-space basis this short search
+    # gets to 0.22 m (0.15 m was reached with the former t/τ-spaced basis).
+    assert best.info["tip_distance"][0] < 0.25 and best.returns[0] > still + 10
     assert best.returns[0] > rand.returns.max() + 10
 
 

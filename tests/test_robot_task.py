@@ -148,18 +148,34 @@ def test_prodmp_trajectory_delay_duration_and_goal():
         tau_bounds=(0.5, 1.5), delay_bounds=(0.0, 0.3), goal="relative", auto_scale_basis=False
     )
     q0 = np.array([0.3, -0.2])
-    theta = np.r_[0.8, 0.2, [1.0, -2.0, 0.5, 0.0, 3.0, 1.0], [0.4, -0.1]]
+    # mp_pytorch's layout: [tau, delay, per joint [w_1, w_2, w_3, g]]
+    theta = np.r_[0.8, 0.2, [1.0, -2.0, 0.5, 0.4], [0.0, 3.0, 1.0, -0.1]]
     q, dq = spec.trajectory(theta, q0)
     assert q.shape == dq.shape == (101, 2)
     np.testing.assert_allclose(q[:21], np.repeat(q0[None], 21, axis=0))  # held until t = 0.2
     np.testing.assert_allclose(dq[:21], 0.0)
-    # after the delay: the library ProDMP with tau 0.8 over the remaining 0.8 s, goal q0 + g
-    dmp = ProDMP(3, 2, duration=0.8, dt=0.01, alpha=25.0, tau=0.8, alpha_x=3.0)
-    w = theta[2:8].reshape(2, 3)
-    params = np.concatenate([w, (q0 + theta[8:])[:, None]], axis=1).reshape(-1)
+    # after the delay: the library ProDMP with tau 0.8 (basis grid built for the spec's tau,
+    # 1.0) over the remaining 0.8 s, goal q0 + g
+    dmp = ProDMP(3, 2, duration=0.8, dt=0.01, alpha=25.0, tau=0.8, alpha_x=3.0, basis_tau=1.0)
+    blocks = theta[2:].reshape(2, 4)
+    params = np.concatenate([blocks[:, :3], (q0 + blocks[:, 3])[:, None]], axis=1).reshape(-1)
     ref, dref = dmp.trajectory(torch.from_numpy(params), torch.from_numpy(q0), torch.zeros(2))
     np.testing.assert_allclose(q[20:], ref.numpy(), atol=1e-12)
     np.testing.assert_allclose(dq[20:], dref.numpy(), atol=1e-12)
+    # the delay is continuous (not rounded to the grid): 0.2049 s starts within step 20..21
+    late = theta.copy()
+    late[1] = 0.2049
+    q_late, _ = spec.trajectory(late, q0)
+    np.testing.assert_allclose(q_late[:21], q[:21])
+    assert 0 < np.abs(q_late[21:] - q[21:]).max() < np.abs(q[21:] - q0).max()
+    dmp_late = ProDMP(
+        3, 2, duration=1.0, dt=0.01, alpha=25.0, tau=0.8, alpha_x=3.0, delay=0.2049,
+        basis_tau=1.0, relative_goal=True,
+    )  # fmt: skip
+    want, _ = dmp_late.trajectory_numpy(theta[2:], q0, np.zeros(2))
+    np.testing.assert_allclose(q_late, want, atol=1e-12)
+    with pytest.raises(ValueError, match=r"dq0 must be zero when the start is delayed"):
+        spec.trajectory(theta, q0, np.ones(2))
     # out-of-bounds tau / delay: clipped for the trajectory, reported by bound_excess
     wild = theta.copy()
     wild[0], wild[1] = 2.0, -0.1
@@ -202,6 +218,13 @@ def test_every_task_is_registered_under_its_name_with_a_gymnasium_id():
     assert all(env_id in gym.registry for env_id in STEP_IDS)
     with pytest.raises(ValueError, match="unknown task 'beer-pog'; did you mean beer-pong"):
         make_task("beer-pog")
+    # a misspelt option is an error naming it and the options the task has, not ignored
+    with pytest.raises(ValueError, match="PlanarReacherTask has no option 'exclude_base_jiont'; "
+                       "expected some of exclude_base_joint"):  # fmt: skip
+        make_task("planar-reacher", exclude_base_jiont=True)
+    assert make_task("planar-reacher", exclude_base_joint=True)._kwargs == {
+        "exclude_base_joint": True
+    }
 
 
 def test_the_one_step_env_leaves_numbers_that_do_not_apply_out_of_its_info():

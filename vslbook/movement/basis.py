@@ -7,7 +7,9 @@ Two ingredients are used throughout:
   over ``[0, 1]`` and width ``h``, divided by their sum so that ``sum_i psi_i(s) = 1``.
   ProMPs (Eq. 2.46) use them directly with ``s = t / duration``.
 * the DMP canonical system ``x(t) = exp(-alpha_x t / tau)`` (Eq. 2.45) and the DMP forcing
-  basis ``x phi(x)``.
+  basis ``x phi(x)``, whose Gaussians are functions of the phase ``x`` (not of ``t / tau``),
+  centred at the phases of times spaced evenly over ``[0, tau]`` (Eqs. B1-B3 below; the
+  basis of MP_PyTorch, which the authors' code uses).
 
 The module also holds the small input checks used by ``promp``, ``dmp`` and ``prodmp``.
 """
@@ -171,24 +173,102 @@ def normalized_rbf_np(
     return psi if basis_first else np.moveaxis(psi, 0, -1)
 
 
+BANDWIDTH_RULES = ("di-skill", "mp_pytorch-0.1.3")
+
+
+def phase_rbf_centres(
+    n_basis: int, alpha_x: float = 3.0, bandwidth_factor: float = 3.0, rule: str = "di-skill"
+) -> tuple[np.ndarray, np.ndarray]:
+    """Centres ``c_i`` and bandwidths ``h_i`` of the DMP forcing basis in phase space (Eq. B1).
+
+    The centres are spaced evenly in *time* over ``[0, tau]`` and mapped to the exponential
+    phase ``x = exp(-alpha_x t / tau)`` of Eq. 2.45:
+
+        c_i = exp(-alpha_x i / (n - 1)),  i = 0, ..., n - 1,                         (Eq. B1)
+
+    (one bump: ``c_0 = exp(-alpha_x / 2)``), so they crowd towards ``x = 0``. The bandwidth
+    of bump ``i`` is the inverse square of its distance to the next centre times
+    ``bandwidth_factor``,
+
+        h_i = bandwidth_factor / (c_{i+1} - c_i)^2.                                    (Eq. B2)
+
+    The last bump has no successor; the two rules differ only there:
+
+    * ``"di-skill"`` (the MP_PyTorch copy that the authors' Di-SkilL code runs, as in
+      mp_pytorch's later releases): ``c_n`` is one more centre one time spacing after the
+      last, ``exp(-alpha_x n / (n - 1))``; with exactly two bumps this last distance is doubled.
+    * ``"mp_pytorch-0.1.3"`` (the release fancy-gym 0.3.0 pins): the last bump repeats the
+      previous distance, ``h_{n-1} = h_{n-2}``.
+
+    A single bump has bandwidth ``bandwidth_factor`` (distance 1). Returns ``(c, h)``, each
+    ``(n,)``; the basis does not depend on tau or on a start delay (they only map t to x).
+    """
+    n_basis = _check_int("n_basis", n_basis)
+    alpha_x = _check_positive("alpha_x", alpha_x)
+    bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+    if rule not in BANDWIDTH_RULES:
+        raise ValueError(f"rule must be one of {BANDWIDTH_RULES}, got {rule!r}")
+    if n_basis == 1:
+        return np.array([math.exp(-0.5 * alpha_x)]), np.array([bandwidth_factor])
+    # centres at the times linspace(0, tau, n) (in units of tau), one more for the last gap
+    steps = np.linspace(0.0, 1.0, n_basis)
+    if rule == "di-skill":
+        steps = np.append(steps, steps[-1] + (steps[1] - steps[0]))
+        centres = np.exp(-alpha_x * steps)
+        gaps = np.diff(centres)
+        if n_basis == 2:
+            gaps[-1] *= 2.0
+        centres = centres[:-1]
+    else:
+        centres = np.exp(-alpha_x * steps)
+        gaps = np.diff(centres)
+        gaps = np.append(gaps, gaps[-1])
+    return centres, bandwidth_factor / gaps**2
+
+
+def phase_rbf_np(
+    x: np.ndarray,
+    n_basis: int,
+    alpha_x: float = 3.0,
+    bandwidth_factor: float = 3.0,
+    rule: str = "di-skill",
+    *,
+    basis_first: bool = False,
+) -> np.ndarray:
+    """Normalised Gaussians in the phase, ``phi_i(x) = b_i(x) / sum_j b_j(x)`` (Eq. B3), with
+    ``b_i(x) = exp(-h_i (x - c_i)^2 / 2)`` and ``(c, h)`` of :func:`phase_rbf_centres`.
+
+    Float64, shape ``(*x.shape, n)`` (``basis_first``: ``(n, *x.shape)``). A single bump is not
+    normalised. The sum carries a ``1e-15`` guard under the Di-SkilL rule, as that code does.
+    """
+    centres, bandwidths = phase_rbf_centres(n_basis, alpha_x, bandwidth_factor, rule)
+    x = np.asarray(x, dtype=np.float64)
+    shape = (len(centres), *[1] * x.ndim)
+    psi = np.exp(-0.5 * bandwidths.reshape(shape) * (x[None] - centres.reshape(shape)) ** 2)
+    if len(centres) > 1:
+        psi /= psi.sum(axis=0) + (1e-15 if rule == "di-skill" else 0.0)
+    return psi if basis_first else np.moveaxis(psi, 0, -1)
+
+
 def dmp_forcing_basis(
     t: Array,
     n_basis: int,
     alpha_x: float = 3.0,
     tau: float = 1.0,
-    width: float | None = None,
+    bandwidth_factor: float = 3.0,
+    rule: str = "di-skill",
 ) -> torch.Tensor:
     """The DMP forcing basis ``x(t) phi(x(t))`` of Eq. 2.45, shape ``(*t.shape, n_basis)``.
 
-    ``phi(x)`` is the normalised RBF evaluated at ``s = -ln(x) / alpha_x = t / tau``. This is a
-    function of the phase ``x`` alone, and it spreads the bumps evenly in time over
-    ``[0, tau]`` (the usual choice of centres ``exp(-alpha_x c_i)`` in phase space). The forcing
-    term of one degree of freedom is then ``f(x) = x phi(x)^T theta``. ``s`` is computed as
-    ``t / tau`` so that it stays finite after ``x`` underflows. Computed in float64 by
-    :func:`dmp_forcing_basis_np`, returned in the dtype of ``t``.
+    ``phi`` are the phase-space Gaussians of :func:`phase_rbf_np` (Eqs. B1-B3), evaluated at
+    ``x = exp(-alpha_x max(t, 0) / tau)``; the forcing term of one degree of freedom is
+    ``f(x) = x phi(x)^T theta``. Computed in float64 by :func:`dmp_forcing_basis_np`,
+    returned in the dtype of ``t``.
     """
     t = _as_tensor("t", t)
-    basis = dmp_forcing_basis_np(t.detach().cpu().numpy(), n_basis, alpha_x, tau, width)
+    basis = dmp_forcing_basis_np(
+        t.detach().cpu().numpy(), n_basis, alpha_x, tau, bandwidth_factor, rule
+    )
     return torch.from_numpy(basis).to(t.dtype)
 
 
@@ -197,15 +277,15 @@ def dmp_forcing_basis_np(
     n_basis: int,
     alpha_x: float = 3.0,
     tau: float = 1.0,
-    width: float | None = None,
+    bandwidth_factor: float = 3.0,
+    rule: str = "di-skill",
     *,
     basis_first: bool = False,
 ) -> np.ndarray:
-    """:func:`dmp_forcing_basis` in numpy, float64 (``x(t) = exp(-alpha_x t / tau)``, Eq. 2.45);
-    ``basis_first`` puts the basis index first, ``(n_basis, *t.shape)``."""
+    """:func:`dmp_forcing_basis` in numpy, float64; ``basis_first`` puts the basis index
+    first, ``(n_basis, *t.shape)``."""
     alpha_x = _check_positive("alpha_x", alpha_x)
     tau = _check_positive("tau", tau)
-    t = np.asarray(t, dtype=np.float64)
-    x = np.exp(-alpha_x * t / tau)
-    psi = normalized_rbf_np(t / tau, n_basis, width, basis_first=True)
+    x = np.exp(-alpha_x * np.maximum(np.asarray(t, dtype=np.float64), 0.0) / tau)
+    psi = phase_rbf_np(x, n_basis, alpha_x, bandwidth_factor, rule, basis_first=True)
     return x * psi if basis_first else np.moveaxis(x * psi, 0, -1)

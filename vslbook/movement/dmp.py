@@ -42,7 +42,9 @@ class DMP:
         beta: spring constant ``beta`` (> 0); ``None`` means ``alpha / 4`` (critical damping).
         tau: temporal scaling (gamma in the thesis, > 0).
         alpha_x: decay rate of the canonical phase (> 0).
-        width: RBF width in units of ``t / tau``; ``None`` uses the spacing of the centres.
+        bandwidth_factor: scales the bandwidths of the phase-space Gaussians (Eq. B2).
+        rule: how the last Gaussian's bandwidth is set, ``"di-skill"`` or
+            ``"mp_pytorch-0.1.3"`` (:func:`~vslbook.movement.basis.phase_rbf_centres`).
         substeps: Euler steps per output step ``dt`` (>= 1).
         dtype: floating dtype of all returned tensors.
     """
@@ -57,9 +59,10 @@ class DMP:
         beta: float | None = None,
         tau: float = 1.0,
         alpha_x: float = 3.0,
-        width: float | None = None,
+        bandwidth_factor: float = 3.0,
         substeps: int = 10,
         *,
+        rule: str = "di-skill",
         dtype: torch.dtype = torch.float64,
     ) -> None:
         self.n_basis = _check_int("n_basis", n_basis)
@@ -70,7 +73,8 @@ class DMP:
         self.beta = self.alpha / 4.0 if beta is None else _check_positive("beta", beta)
         self.tau = _check_positive("tau", tau)
         self.alpha_x = _check_positive("alpha_x", alpha_x)
-        self.width = None if width is None else _check_positive("width", width)
+        self.bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+        self.rule = rule
         self.substeps = _check_int("substeps", substeps)
         self.dtype = dtype
         self.n_params = self.n_dof * self.n_basis
@@ -79,14 +83,16 @@ class DMP:
         n_fine = (len(self.times) - 1) * self.substeps
         fine_times = torch.arange(n_fine, dtype=dtype) * (self.dt / self.substeps)
         self._forcing_basis = dmp_forcing_basis(
-            fine_times, self.n_basis, self.alpha_x, self.tau, self.width
+            fine_times, self.n_basis, self.alpha_x, self.tau, self.bandwidth_factor, rule
         )
 
     def forcing(self, w: Array) -> torch.Tensor:
         """Forcing ``f = x phi(x)^T theta`` (Eq. 2.45) on :attr:`times`, ``(..., T, n_dof)``."""
         w = _check_last_dim("w", _as_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis")
         w = w.reshape(*w.shape[:-1], self.n_dof, self.n_basis)
-        basis = dmp_forcing_basis(self.times, self.n_basis, self.alpha_x, self.tau, self.width)
+        basis = dmp_forcing_basis(
+            self.times, self.n_basis, self.alpha_x, self.tau, self.bandwidth_factor, self.rule
+        )
         return torch.einsum("ti,...di->...td", basis, w)
 
     def rollout(

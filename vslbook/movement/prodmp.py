@@ -2,29 +2,25 @@
 on Dynamic and Probabilistic Movement Primitives"; thesis Sec. 2.6.1).
 
 A ProDMP solves the DMP of Eq. 2.45 in closed form instead of integrating it for every
-parameter vector. With the critically damped choice ``beta = alpha / 4`` and
-``a = alpha / (2 tau)``, Eq. 2.45 divided by ``tau^2`` reads
+parameter vector. Positions and velocities are affine in the parameters
+``w_g = [w_1, ..., w_n, g]`` of each degree of freedom (dof) and in the initial state
+(Eqs. P1-P3 of :mod:`vslbook.movement.prodmp_basis`, which derives them):
 
-    y'' + 2 a y' + a^2 y = a^2 g + f(t) / tau^2,    f(t) = x(t) phi(x(t))^T w.
+    y(t)  = xi1(s) y0 + xi2(s) tau dy0 + G(s)^T (c * w_g) [+ G_g(s) y0],     s = (t - delay) / tau,
+    y'(t) = (xi1'(s) y0 + xi2'(s) tau dy0 + G'(s)^T (c * w_g) [+ G_g'(s) y0]) / tau,
 
-Its homogeneous solutions are ``y1 = exp(-a t)`` and ``y2 = t exp(-a t)`` (Wronskian
-``exp(-2 a t)``), and variation of parameters gives the particular solution (Li et al., 2023)
+with ``s`` clipped at 0 (the trajectory holds ``y0`` until ``delay``), ``G`` the position basis
+made to start at rest at zero, ``c`` the per-column scales (``weights_scale`` for the weights,
+``goal_scale`` for the goal, each times ``1 / max G`` under ``auto_scale_basis``), and the
+bracket only with ``relative_goal`` (then the goal is ``y0 + c_g g``). The initial conditions
+``y(0) = y0`` and ``y'(0) = dy0`` hold exactly for any ``w_g``.
 
-    y_p(t) = y2(t) p2(t)^T w - y1(t) p1(t)^T w + g,
-    p1(t) = int_0^t s exp(a s) x phi(x) / tau^2 ds,   p2(t) = int_0^t exp(a s) x phi(x) / tau^2 ds.
-
-The position basis ``Phi(t) = [y2 p2 - y1 p1, 1]`` is linear in the parameters
-``w_g = [w, g]`` of each dof and is integrated numerically once, at construction. Its time
-derivative is ``[y2' p2 - y1' p1, 0]`` (the terms with ``p1'`` and ``p2'`` cancel). A trajectory
-is then
-
-    y(t) = c1 y1(t) + c2 y2(t) + Phi(t)^T w_g,
-
-with ``c1, c2`` solved from ``y(t0) = y0`` and ``y'(t0) = dy0`` at ``t0 = 0`` (a 2x2 system
-whose determinant is the Wronskian), so the initial conditions hold exactly for any ``w_g``.
-
-Parameters have shape ``(..., n_dof * (n_basis + 1))``, one block ``[w_1..w_n, g]`` per dof.
-The forcing convention is the one of :class:`~vslbook.movement.dmp.DMP` (no ``(g - y0)`` factor).
+This is the construction of MP_PyTorch (which fancy-gym and the authors' Di-SkilL code use):
+the forcing Gaussians live in the exponential phase (:func:`~vslbook.movement.basis.
+phase_rbf_centres`), the basis is integrated on a grid of scaled time built for ``basis_tau``
+and read by linear interpolation. Parameters have shape ``(..., n_dof * (n_basis + 1))``, one
+block ``[w_1..w_n, g]`` per dof, mp_pytorch's layout. The forcing convention is the one of
+:class:`~vslbook.movement.dmp.DMP` (no ``(g - y0)`` factor).
 """
 
 from __future__ import annotations
@@ -41,37 +37,20 @@ from vslbook.movement.basis import (
     _check_int,
     _check_last_dim,
     _check_positive,
-    dmp_forcing_basis_np,
     time_grid_np,
 )
+from vslbook.movement.prodmp_basis import initial_value_maps, prodmp_basis
 
 _A = TypeVar("_A", torch.Tensor, np.ndarray)
 
 
-def _cumulative_trapezoid(values: np.ndarray, h: float) -> np.ndarray:
-    """``int_0^{t_k} values dt`` along the last axis for samples spaced ``h`` apart
-    (trapezoid rule)."""
-    out = np.empty_like(values)
-    out[..., 0] = 0.0
-    np.cumsum(0.5 * h * (values[..., 1:] + values[..., :-1]), axis=-1, out=out[..., 1:])
-    return out
-
-
-def _solve_initial(phi: _A, dphi: _A, y: _A, dy: _A, w_g: _A, y0: _A, dy0: _A) -> tuple[_A, _A]:
-    """Positions and velocities ``(..., T, n_dof)`` of parameters ``w_g (..., n_dof, P)``
-    from the bases ``Phi, Phi' (T, P)`` and ``[y1, y2], [y1', y2'] (T, 2)``: the particular
-    solution plus ``c1 y1 + c2 y2`` with ``c1, c2`` from ``y(t0) = y0``, ``y'(t0) = dy0``
-    (a 2x2 system solved by Cramer's rule; its determinant is the Wronskian). The same
-    expression for torch tensors (differentiable) and numpy arrays."""
-    pos_p = phi @ w_g.swapaxes(-1, -2)
-    vel_p = dphi @ w_g.swapaxes(-1, -2)
-    (y1, y2), (dy1, dy2) = y[0], dy[0]
-    wronskian = y1 * dy2 - y2 * dy1
-    r0, r1 = y0 - pos_p[..., 0, :], dy0 - vel_p[..., 0, :]
-    c1 = ((dy2 * r0 - y2 * r1) / wronskian)[..., None, :]
-    c2 = ((y1 * r1 - dy1 * r0) / wronskian)[..., None, :]
-    positions = y[:, :1] * c1 + y[:, 1:] * c2 + pos_p
-    velocities = dy[:, :1] * c1 + dy[:, 1:] * c2 + vel_p
+def _affine(phi: _A, dphi: _A, init: _A, d_init: _A, w_g: _A, y0: _A, dy0: _A) -> tuple[_A, _A]:
+    """Positions and velocities ``(..., T, n_dof)`` of parameters ``w_g (..., n_dof, P)`` from
+    the bases ``phi, dphi (T, P)`` and the initial-state maps ``init, d_init (T, 2)`` (Eq. P3).
+    The same expression for torch tensors (differentiable) and numpy arrays."""
+    y0, dy0 = y0[..., None, :], dy0[..., None, :]
+    positions = init[:, :1] * y0 + init[:, 1:] * dy0 + phi @ w_g.swapaxes(-1, -2)
+    velocities = d_init[:, :1] * y0 + d_init[:, 1:] * dy0 + dphi @ w_g.swapaxes(-1, -2)
     return positions, velocities
 
 
@@ -81,13 +60,22 @@ class ProDMP:
     Args:
         n_basis: forcing basis functions per dof (>= 1).
         n_dof: degrees of freedom (>= 1).
-        duration: length of the trajectory in seconds.
+        duration: length of the trajectory in seconds (the grid ``0, dt, ..., duration``).
         dt: time step of the output grid :attr:`times`.
         alpha: spring-damper constant (> 0); ``beta = alpha / 4`` (critical damping).
         tau: temporal scaling (gamma in the thesis, > 0).
         alpha_x: decay rate of the canonical phase (> 0).
-        width: RBF width in units of ``t / tau``; ``None`` uses the spacing of the centres.
-        substeps: trapezoid steps per output step ``dt`` when precomputing the basis (>= 1).
+        bandwidth_factor: bandwidth factor of the phase-space Gaussians (Eq. B2).
+        delay: start time (>= 0): the trajectory holds ``y0`` (velocity ``dy0``) before it.
+        basis_tau: the τ the basis grid is built for (MP_PyTorch's construction-time τ);
+            ``None`` uses ``tau``.
+        basis_dt: MP_PyTorch's basis step (0.01 s, which fancy-gym never changes).
+        length_factor: the grid covers scaled times ``[0, length_factor]``; ``None``: 6
+            under the Di-SkilL rule, 5 under mp_pytorch 0.1.3's (their defaults).
+        rule: ``"di-skill"`` or ``"mp_pytorch-0.1.3"``, the last Gaussian's bandwidth.
+        auto_scale_basis: divide each basis column by its largest value on the grid.
+        weights_scale, goal_scale: multiply the weights' and the goal's columns.
+        relative_goal: the goal is ``y0 + goal parameter`` instead of the parameter itself.
         dtype: floating dtype of all returned tensors (the basis is computed in float64).
     """
 
@@ -100,9 +88,17 @@ class ProDMP:
         alpha: float = 25.0,
         tau: float = 1.0,
         alpha_x: float = 3.0,
-        width: float | None = None,
-        substeps: int = 10,
+        bandwidth_factor: float = 3.0,
         *,
+        delay: float = 0.0,
+        basis_tau: float | None = None,
+        basis_dt: float = 0.01,
+        length_factor: int | None = None,
+        rule: str = "di-skill",
+        auto_scale_basis: bool = False,
+        weights_scale: float = 1.0,
+        goal_scale: float = 1.0,
+        relative_goal: bool = False,
         dtype: torch.dtype = torch.float64,
     ) -> None:
         self.n_basis = _check_int("n_basis", n_basis)
@@ -113,57 +109,47 @@ class ProDMP:
         self.beta = self.alpha / 4.0
         self.tau = _check_positive("tau", tau)
         self.alpha_x = _check_positive("alpha_x", alpha_x)
-        self.width = None if width is None else _check_positive("width", width)
-        self.substeps = _check_int("substeps", substeps)
+        self.bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+        if not (isinstance(delay, (int, float, np.floating)) and 0 <= delay < float("inf")):
+            raise ValueError(f"delay must be a finite number >= 0, got {delay!r}")
+        self.delay = float(delay)
+        self.basis_tau = self.tau if basis_tau is None else _check_positive("basis_tau", basis_tau)
+        self.relative_goal = bool(relative_goal)
         self.dtype = dtype
         self.n_params = self.n_dof * (self.n_basis + 1)
-        a = self.alpha / (2.0 * self.tau)
         t = time_grid_np(self.duration, self.dt)
-        if a * float(t[-1]) > 600.0:
-            raise ValueError(
-                f"alpha * duration / (2 tau) must be at most 600 so that exp(a t) stays finite, "
-                f"got {a * float(t[-1]):.1f}"
-            )
         self.times = torch.from_numpy(t).to(dtype)
-        # The bases are computed once, in float64 numpy (see basis.normalized_rbf_np).
-        decay = np.exp(-a * t)
-        y1, y2 = decay, t * decay
-        dy1, dy2 = -a * y1, (1.0 - a * t) * decay
-
-        # p1, p2 on a grid `substeps` times finer than `times`, then read off at `times`.
-        h = self.dt / self.substeps
-        fine = np.arange((len(t) - 1) * self.substeps + 1, dtype=np.float64) * h
-        # (basis, time) layout: the integrals run along contiguous rows
-        forcing = dmp_forcing_basis_np(
-            fine, self.n_basis, self.alpha_x, self.tau, self.width, basis_first=True
+        basis = prodmp_basis(
+            self.n_basis, self.alpha, self.alpha_x, self.bandwidth_factor, rule,
+            self.basis_tau, basis_dt,
+            length_factor or (5 if rule == "mp_pytorch-0.1.3" else 6),
+        )  # fmt: skip
+        # Eq. P3 with the initial conditions at t0 = 0, i.e. s0 = 0 (before any delay)
+        s = np.maximum((t - self.delay) / self.tau, 0.0)
+        xi, dxi, g, dg = initial_value_maps(basis, s, 0.0)
+        scale = np.full(self.n_basis + 1, float(weights_scale))
+        scale[-1] = float(goal_scale)
+        if auto_scale_basis:
+            scale = scale * basis.scale
+        phi, dphi = g * scale, dg * scale / self.tau
+        rel = 1.0 if self.relative_goal else 0.0
+        # y = init[:, 0] y0 + init[:, 1] dy0 + phi w_g (velocities: d_init, dphi)
+        init = np.stack([xi[:, 0] + rel * g[:, -1], xi[:, 1] * self.tau], 1)
+        d_init = np.stack([(dxi[:, 0] + rel * dg[:, -1]) / self.tau, dxi[:, 1]], 1)
+        self._np = (phi, dphi, init, d_init)  # float64, for trajectory_numpy
+        self._phi, self._dphi, self._init, self._d_init = (
+            torch.from_numpy(v).to(dtype) for v in self._np
         )
-        integrand = np.exp(a * fine) * forcing / self.tau**2
-        p2 = _cumulative_trapezoid(integrand, h)[:, :: self.substeps].T
-        p1 = _cumulative_trapezoid(fine * integrand, h)[:, :: self.substeps].T
-
-        ones, zeros = np.ones((len(t), 1)), np.zeros((len(t), 1))
-        phi = np.concatenate([y2[:, None] * p2 - y1[:, None] * p1, ones], axis=1)
-        dphi = np.concatenate([dy2[:, None] * p2 - dy1[:, None] * p1, zeros], axis=1)
-        homogeneous = np.stack([y1, y2], axis=-1)
-        d_homogeneous = np.stack([dy1, dy2], axis=-1)
-        self._np = (phi, dphi, homogeneous, d_homogeneous)  # float64, for trajectory_numpy
-        self._phi, self._dphi = (torch.from_numpy(v).to(dtype) for v in (phi, dphi))
-        self._y, self._dy = (torch.from_numpy(v).to(dtype) for v in self._np[2:])
         for arr in self._np:  # shared with the float64 tensors: neither is ever written
             arr.flags.writeable = False
-
-        # Positions as one linear map of (w_g, y0, dy0): with M = [[y1, y2], [y1', y2']](t0)
-        # and B0 = [Phi(t0), Phi'(t0)], c = M^-1 ([y0, dy0] - B0 w_g), hence
-        # y(t) = (Phi(t)^T - [y1, y2](t) M^-1 B0) w_g + [y1, y2](t) M^-1 [y0, dy0].
-        m_inv = np.linalg.inv(np.stack([homogeneous[0], d_homogeneous[0]]))
-        init = homogeneous @ m_inv
-        self._param_map = torch.from_numpy(phi - init @ np.stack([phi[0], dphi[0]])).to(dtype)
+        self._param_map = self._phi
 
     def basis_matrix(self, derivative: bool = False) -> torch.Tensor:
-        """Position basis ``Phi(t) = [y2 p2 - y1 p1, 1]`` on :attr:`times`, ``(T, n_basis + 1)``.
+        """Position basis ``c * G(s(t))`` on :attr:`times`, ``(T, n_basis + 1)`` (Eq. P3).
 
-        The last column multiplies the goal ``g``. ``derivative=True`` returns ``d Phi / dt``.
-        This is the particular-solution basis; the initial conditions enter through ``c1, c2``.
+        The last column multiplies the goal. Every column starts at zero with zero slope (the
+        initial conditions enter through ``xi1, xi2``). ``derivative=True`` returns the
+        time derivative ``d/dt`` (the scaled-time derivative divided by τ).
         """
         return (self._dphi if derivative else self._phi).clone()
 
@@ -192,7 +178,7 @@ class ProDMP:
         params = self._params(params)
         y0, dy0 = self._check_state(y0, dy0)
         w_g = params.reshape(*params.shape[:-1], self.n_dof, self.n_basis + 1)
-        return _solve_initial(self._phi, self._dphi, self._y, self._dy, w_g, y0, dy0)
+        return _affine(self._phi, self._dphi, self._init, self._d_init, w_g, y0, dy0)
 
     def trajectory_numpy(
         self, params: np.ndarray, y0: np.ndarray, dy0: np.ndarray
@@ -208,7 +194,7 @@ class ProDMP:
             if value.ndim < 1 or value.shape[-1] != size:
                 raise ValueError(f"{name} must have shape (..., {size}), got {value.shape}")
         w_g = params.reshape(*params.shape[:-1], self.n_dof, self.n_basis + 1)
-        return _solve_initial(*self._np, w_g, y0, dy0)
+        return _affine(*self._np, w_g, y0, dy0)
 
     def distribution(
         self, mean_params: Array, cov_params: Array, y0: Array, dy0: Array
@@ -216,7 +202,7 @@ class ProDMP:
         """Mean and per-time std of the positions for ``params ~ N(mean_params, cov_params)``.
 
         Positions are affine in the parameters for fixed ``(y0, dy0)``,
-        ``y(t) = H(t)^T w_g + const`` with ``H(t) = Phi(t) - [y1, y2](t) M^-1 [Phi, Phi'](t0)``,
+        ``y(t) = H(t)^T w_g + const`` with ``H`` the scaled basis :meth:`basis_matrix` (Eq. P3),
         so the distribution is Gaussian with mean ``trajectory(mean_params)`` and variance
         ``H(t)^T Sigma_dd H(t)`` for dof ``d`` (``Sigma_dd`` the dof's diagonal block).
 

@@ -205,6 +205,16 @@ def unstable(d: mujoco.MjData) -> bool:
     return any(d.warning[w].number > 0 for w in _BAD_STATE) or not bool(np.all(np.isfinite(d.qpos)))
 
 
+def prodmp_spec(goal: str = "disabled") -> ProDMPSpec:
+    """BPO's ProDMP (Di-SkilL's registration): 4 basis per joint, alpha 10, τ 1.5, weights and
+    goal scaled by 0.3, auto-scaled basis; ``goal`` ``"disabled"`` (28 parameters, thesis) or
+    ``"learned"`` (35, the code: an absolute goal, mp_pytorch's ``relative_goal=False``)."""
+    return ProDMPSpec(
+        n_dof=7, n_basis=4, dt=DT, duration=HORIZON * DT, alpha=10.0, alpha_phase=3.0,
+        tau=1.5, goal=goal, weights_scale=0.3, goal_scale=0.3, auto_scale_basis=True,
+    )  # fmt: skip
+
+
 def is_success(pos_error: float, rot_error: float) -> bool:
     """B.4.2.1: position error below 0.05 m and rotation error below 0.5 rad at the end."""
     return bool(pos_error < SUCCESS_POS and rot_error < SUCCESS_ROT)
@@ -232,11 +242,7 @@ class BoxPushingObstacle(EpisodicTask):
         if goal not in ("disabled", "learned"):
             raise ValueError(f"goal must be 'disabled' (28 params) or 'learned' (35), got {goal!r}")
         super().__init__(goal=goal, joint_limit_check=joint_limit_check)
-        self.mp = ProDMPSpec(
-            n_dof=7, n_basis=4, dt=DT, duration=HORIZON * DT, alpha=10.0, alpha_phase=3.0,
-            tau=1.5, goal=goal, weights_scale=0.3, goal_scale=0.3, auto_scale_basis=True,
-            width=(1.0 / 3.0) / math.sqrt(3.0),
-        )  # fmt: skip
+        self.mp = prodmp_spec(goal)
         self.n_params = self.mp.n_params  # type: ignore[misc]
         self.joint_limit_check = bool(joint_limit_check)
         self.model = build_model()
@@ -312,7 +318,7 @@ class BoxPushingObstacle(EpisodicTask):
         context = np.asarray(context, dtype=np.float64)
         q_d, dq_d = self.mp.trajectory(theta, Q0)
         if self.joint_limit_check:
-            hi, lo = joint_limit_excess(q_d, Q_MIN, Q_MAX)
+            hi, lo = joint_limit_excess(q_d[1:], Q_MIN, Q_MAX)  # the tracked rows
             if hi > 0.0 or lo > 0.0:
                 pen = INVALID_BASE - INVALID_SCALE * (hi + lo)
                 nan = math.nan

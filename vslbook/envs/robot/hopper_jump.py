@@ -26,15 +26,15 @@ Context c (4-D, the thesis's order ``[j3, j4, j5, g]``, B.4.2)
 
 Parameters θ (12, B.4.2)
     ProDMP (:class:`~vslbook.envs.robot.primitives.ProDMPSpec`), 3 joints × 3 basis
-    functions, weights dof-major, then one absolute goal angle per joint:
-    ``θ = [w_thigh(3), w_leg(3), w_foot(3), g_thigh, g_leg, g_foot]``. τ = 0.8 is fixed
+    functions, per joint its weights then its absolute goal angle (mp_pytorch's layout):
+    ``θ = [w_thigh(3), g_thigh, w_leg(3), g_leg, w_foot(3), g_foot]``. τ = 0.8 is fixed
     (not learned), weights_scale = goal_scale = 1, basis auto-scaling on, spring-damper
     α = 10, phase decay 3. The trajectory starts at rest from the context's joint angles.
 
 Controller
-    ``a_t = clip(1.0·(q_d[t] − q_t) + 0.1·(q̇_d[t] − q̇_t), −1, 1)`` on the three actuated
-    joints (the normalised actuator command, held for the 4 physics steps of control step t;
-    q_d[t] is the trajectory at time t·dt).
+    ``a_t = clip(1.0·(q_d − q_t) + 0.1·(q̇_d − q̇_t), −1, 1)`` on the three actuated
+    joints (the normalised actuator command, held for the 4 physics steps of control step t),
+    with q_d, q̇_d the trajectory at time (t + 1)·dt, as fancy-gym's black-box wrapper.
 
 Reward (non-Markovian, sparse; the return is the sum of the step rewards, B.4.2)
     every step ``−τ_t`` with ``τ_t = 10⁻³ Σ_i (a_t^i)²`` (the clipped command), and after the
@@ -241,7 +241,8 @@ class HopperJump(EpisodicTask):
         c = np.asarray(context, dtype=np.float64)
         if c.shape != (4,):
             raise ValueError(f"HJ: a context has 4 entries {self.context_names}, got {c.shape}")
-        q_d, dq_d = self.spec.trajectory(theta, c[:3], np.zeros(3))
+        # control step t tracks the primitive at (t + 1) dt (row 0 is the start state)
+        q_d, dq_d = (a[1:] for a in self.spec.trajectory(theta, c[:3], np.zeros(3)))
         self.reset(c)
         m, d = self.model, self.data
         # views into MjData, updated in place by mj_step

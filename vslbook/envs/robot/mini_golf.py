@@ -50,16 +50,20 @@ Reward (B.4.4, :func:`step_cost` and :func:`final_reward`): every step t < T cos
 compensation). The last step instead gives, with minima over all substeps of the episode,
 
 * no hit: ``0.2 − 0.2 tanh(min ‖p_rod_tip − p_ball‖)``;
-* hit, not passed: ``2 − 2 tanh(min ‖p_ball − p_goal‖) − tanh(|min y_ball − (−0.75)|)``,
+* hit, not passed (the authors' code, the default ``reward="code"``):
+  ``2 − 2 tanh(min ‖p_ball − p_goal‖) + 0.5 (1 − tanh(min y_ball + 0.75))``,
   p_goal the site ``ball_target`` at (x_goal, −0.7, 0.005);
 * hit and passed: ``6``.
 
-The return is the sum. ⚠ The thesis does not say at which time p_ball,y enters the third
-case; the minimum over the episode is used, as in the authors' code. The code's third case is
-``2 − 2 tanh(min ‖p_ball − p_goal‖) + 0.5 (1 − tanh(min y_ball + 0.75))``, i.e. the y-term
-weighed by 0.5 with an offset of +0.5 (``reward="code"`` gives it). Unstable simulation
-(MuJoCo's bad-acceleration warning or a non-finite state): that step gives −50 (the code's
-value) instead of its reward and the episode ends.
+The return is the sum. ⚠ B.4.4 prints the third case as
+``2 − 2 tanh(min ‖p_b − p_g‖) − tanh(‖p_b,y − p_thresh,y‖)`` (``reward="thesis"``; it does
+not say at which time p_b,y enters, the minimum over the episode is used as in the code).
+The code's y-term has weight 0.5, an offset of +0.5 and no absolute value. The thesis's
+form ranks a touched ball that stays put (min y_ball ≈ 0.5: about −0.5) below a miss (about
++0.17), so it punishes hitting the ball at all; the code's form (about +0.33) does not, and
+the code's form made Fig. 4.4d, hence the default. Unstable simulation (MuJoCo's
+bad-acceleration warning or a non-finite state): that step gives −50 (the code's value)
+instead of its reward and the episode ends.
 
 Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball`` (centre) and ``club``
 (the ``rod_tip`` site at the club head) at the start and after every control step, read as
@@ -111,12 +115,12 @@ ACTION_COST = 0.0005
 UNSTABLE_STEP = -50.0
 INVALID_SCALE, INVALID_OFFSET, INVALID_TAU_WEIGHT = 20.0, -5.0, 3.0
 PASSED_REWARD = 6.0
-REWARD_VARIANTS = ("thesis", "code")
+#: The third case's variants (module docstring): the authors' code (default) and B.4.4's text.
+REWARD_VARIANTS = ("code", "thesis")
 
 SPEC = ProDMPSpec(
     n_dof=7, n_basis=4, dt=DT, duration=HORIZON * DT, alpha=25.0, alpha_phase=3.0,
-    tau_bounds=TAU_BOUNDS, goal="disabled", weights_scale=0.3, auto_scale_basis=True,
-    width=(1.0 / 3.0) / math.sqrt(3.0),
+    tau=1.5, tau_bounds=TAU_BOUNDS, goal="disabled", weights_scale=0.3, auto_scale_basis=True,
 )  # fmt: skip
 
 
@@ -137,9 +141,9 @@ def final_reward(
     min_rod_ball: float,
     min_ball_goal: float,
     min_ball_y: float,
-    variant: str = "thesis",
+    variant: str = "code",
 ) -> float:
-    """Reward of the last step (B.4.4's cases 2-4; see the module docstring).
+    """Reward of the last step (B.4.4's R_task, cases 2-4; see the module docstring).
 
     Args:
         hit: the club touched the ball during the episode.
@@ -147,17 +151,21 @@ def final_reward(
         min_rod_ball: min over the episode of ‖p_rod_tip − p_ball‖.
         min_ball_goal: min over the episode of ‖p_ball − p_goal‖.
         min_ball_y: min over the episode of the ball's y.
-        variant: ``"thesis"`` or ``"code"`` (the authors' third case).
+        variant: ``"code"`` (the authors' third case, the default) or ``"thesis"`` (B.4.4's
+            printed third case).
     """
     if variant not in REWARD_VARIANTS:
-        raise ValueError(f"variant must be one of {REWARD_VARIANTS}, got {variant!r}")
+        raise ValueError(
+            f"variant must be one of {', '.join(map(repr, REWARD_VARIANTS))}, got {variant!r}"
+        )
     if not hit:
         return 0.2 - 0.2 * math.tanh(min_rod_ball)
     if passed:
         return PASSED_REWARD
     goal_term = 2.0 - 2.0 * math.tanh(min_ball_goal)
-    if variant == "thesis":
+    if variant == "thesis":  # B.4.4: − tanh(|p_b,y − p_thresh,y|)
         return goal_term - math.tanh(abs(min_ball_y - PASS_Y))
+    # the authors' code: + 0.5 (1 − tanh(min y_ball − p_thresh,y)), no absolute value
     return goal_term + 0.5 * (1.0 - math.tanh(min_ball_y - PASS_Y))
 
 
@@ -209,7 +217,8 @@ class MiniGolf(EpisodicTask):
     """Robot Mini Golf (MG): see the module docstring for every detail.
 
     Args:
-        reward: ``"thesis"`` (B.4.4) or ``"code"`` (the authors' weighting of the y-term).
+        reward: ``"code"`` (default: the authors' third case, which made Fig. 4.4d) or
+            ``"thesis"`` (B.4.4's printed third case); see the module docstring.
         joint_limit_check: reject θ whose τ or q_d leave their bounds without simulating
             (False simulates every θ, τ clipped to its bounds).
     """
@@ -227,9 +236,11 @@ class MiniGolf(EpisodicTask):
     path_names: ClassVar[tuple[str, ...]] = ("ball", "club")
     mp: ClassVar[ProDMPSpec] = SPEC
 
-    def __init__(self, reward: str = "thesis", joint_limit_check: bool = True) -> None:
+    def __init__(self, reward: str = "code", joint_limit_check: bool = True) -> None:
         if reward not in REWARD_VARIANTS:
-            raise ValueError(f"reward must be one of {REWARD_VARIANTS}, got {reward!r}")
+            raise ValueError(
+                f"reward must be one of {', '.join(map(repr, REWARD_VARIANTS))}, got {reward!r}"
+            )
         super().__init__(reward=reward, joint_limit_check=joint_limit_check)
         self.reward = reward
         self.joint_limit_check = bool(joint_limit_check)
@@ -390,7 +401,7 @@ class MiniGolf(EpisodicTask):
         theta, context = self.episode_args(theta, context)
         q_d, dq_d = self.mp.trajectory(theta, Q0)
         if self.joint_limit_check:
-            penalty = invalid_penalty(theta, q_d)
+            penalty = invalid_penalty(theta, q_d[1:])  # the tracked rows (not t = 0)
             if penalty < 0.0:
                 return Episode(penalty, False, False, dict.fromkeys(self.info_keys, math.nan))
         trace = self.simulate(q_d, dq_d, context)

@@ -1,16 +1,18 @@
 """θ → desired joint trajectory for the robot tasks: ProDMP with learned duration and start
 time, ProMP with a learned duration, and the bounds checks done before simulation.
 
-The parameter layout follows the thesis's counts (Sections 3.4, 4.5.1; Appendices A.3, B.4):
-``[τ (if learned), delay (if learned), weights (dof-major, n_basis per dof), goal per dof
-(if learned)]``. The trajectory is sampled on the control grid ``0, dt, ..., duration``.
-Before the start time (``delay``) the robot holds its initial position; from then on the
-ProDMP of :mod:`vslbook.movement` runs with temporal scaling τ, starting at rest from the
-initial position, and keeps converging to its goal after τ.
+The parameter layout is mp_pytorch's, so a θ of the authors' code runs here unchanged:
+``[τ (if learned), delay (if learned), then per joint [w_1 … w_B, g (if the goal is not
+disabled)]]`` (the thesis's counts, Sections 3.4, 4.5.1; Appendices A.3, B.4). The trajectory
+is the ProDMP of :class:`vslbook.movement.ProDMP` built as the fancy-gym black-box wrapper
+builds it: the phase is ``s = max(t − delay, 0) / τ`` with a continuous delay (the robot's
+desired state is its start state until then), the initial conditions ``(q0, q̇0)`` hold at
+t = 0, the basis grid is built for the construction-time τ (``tau``, also when τ is learned),
+and ``auto_scale_basis`` divides each basis column by its largest value on that grid;
+``weights_scale`` and ``goal_scale`` multiply the weights' and the goal's columns.
 
-``auto_scale_basis`` divides each weight's basis function by its largest absolute value on
-the grid, so weights of different basis functions move the trajectory by similar amounts;
-``weights_scale`` and ``goal_scale`` multiply the weights and the goal offsets.
+:meth:`ProDMPSpec.trajectory` samples the grid ``0, dt, …, duration``; row 0 is the start
+state and control step k tracks row k + 1, i.e. ``q_d((k + 1)·dt)`` (the wrapper drops t = 0).
 """
 
 from __future__ import annotations
@@ -33,11 +35,15 @@ class ProDMPSpec:
         n_dof, n_basis: joints and forcing basis functions per joint.
         dt: control time step (the trajectory grid), duration: episode length in seconds.
         alpha: spring-damper constant, alpha_phase: decay of the canonical phase.
-        tau: τ when it is not learned; tau_bounds: (low, high) when it is (θ[0]).
+        tau: τ when it is not learned; when it is (θ[0], tau_bounds = (low, high)), the
+            construction-time τ for which the basis grid is built (1.5 in Di-SkilL).
         delay_bounds: (low, high) when the start time is learned (θ after τ).
         goal: ``"learned"`` (absolute goal per joint in θ), ``"relative"`` (goal = q0 + g
-            with g in θ) or ``"disabled"`` (goal = q0, no goal parameters).
-        width: basis width in units of t/τ (None: the centres' spacing).
+            with g in θ; mp_pytorch's ``relative_goal``) or ``"disabled"`` (goal = q0, no goal
+            parameters; ``disable_goal`` with ``relative_goal``).
+        bandwidth_factor: of the phase-space Gaussians (3 in every task).
+        rule: the last Gaussian's bandwidth, ``"di-skill"`` (default: the code behind the
+            thesis's runs) or ``"mp_pytorch-0.1.3"`` (fancy-gym 0.3.0's pinned release).
     """
 
     n_dof: int
@@ -53,7 +59,8 @@ class ProDMPSpec:
     weights_scale: float = 1.0
     goal_scale: float = 1.0
     auto_scale_basis: bool = True
-    width: float | None = None
+    bandwidth_factor: float = 3.0
+    rule: str = "di-skill"
 
     def __post_init__(self) -> None:
         if self.goal not in GOAL_MODES:
@@ -75,7 +82,8 @@ class ProDMPSpec:
         return int(round(self.duration / self.dt))
 
     def split(self, theta: np.ndarray) -> tuple[float, float, np.ndarray, np.ndarray | None]:
-        """``(τ, delay, weights (n_dof, n_basis), goal parameters or None)``, unclipped."""
+        """``(τ, delay, weights (n_dof, n_basis), goal parameters (n_dof,) or None)``,
+        unclipped; the weights and goal of joint j are θ's block ``[w_1 … w_B, g]``."""
         theta = np.asarray(theta, dtype=np.float64)
         if theta.shape != (self.n_params,):
             raise ValueError(f"theta must have shape ({self.n_params},), got {theta.shape}")
@@ -85,10 +93,10 @@ class ProDMPSpec:
             tau, i = float(theta[0]), 1
         if self.delay_bounds is not None:
             delay, i = float(theta[i]), i + 1
-        k = self.n_dof * self.n_basis
-        weights = theta[i : i + k].reshape(self.n_dof, self.n_basis)
-        goal = None if self.goal == "disabled" else theta[i + k :]
-        return tau, delay, weights, goal
+        if self.goal == "disabled":
+            return tau, delay, theta[i:].reshape(self.n_dof, self.n_basis), None
+        blocks = theta[i:].reshape(self.n_dof, self.n_basis + 1)
+        return tau, delay, blocks[:, :-1], blocks[:, -1]
 
     def bound_excess(self, theta: np.ndarray) -> tuple[float, float]:
         """How far τ and the delay lie outside their bounds (0 inside)."""
@@ -98,10 +106,12 @@ class ProDMPSpec:
     def trajectory(
         self, theta: np.ndarray, q0: np.ndarray, dq0: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
-        """Desired positions and velocities, each ``(n_steps + 1, n_dof)``.
+        """Desired positions and velocities on ``0, dt, …, duration``, each
+        ``(n_steps + 1, n_dof)``; row 0 is ``(q0, q̇0)``, control step k tracks row k + 1.
 
         τ and the delay are clipped to their bounds here (the validity check uses the
-        unclipped values, :meth:`bound_excess`).
+        unclipped values, :meth:`bound_excess`). As in mp_pytorch, a start velocity is
+        refused when the start is delayed.
         """
         q0 = np.asarray(q0, dtype=np.float64).reshape(self.n_dof)
         dq0 = (
@@ -114,56 +124,26 @@ class ProDMPSpec:
             tau = float(np.clip(tau, *self.tau_bounds))
         if self.delay_bounds is not None:
             delay = float(np.clip(delay, *self.delay_bounds))
-        n = self.n_steps
-        start = int(round(delay / self.dt))
-        q = np.repeat(q0[None], n + 1, axis=0)
-        dq = np.zeros((n + 1, self.n_dof))
-        if start >= n:
-            return q, dq
-        dmp, peak = _prodmp(
-            self.n_basis, self.n_dof, (n - start) * self.dt, self.dt, self.alpha, tau,
-            self.alpha_phase, self.width,
-        )  # fmt: skip
-        w = w * self.weights_scale
-        if self.auto_scale_basis:
-            w = w / peak
-        if self.goal == "learned":
-            goal = g * self.goal_scale
-        elif self.goal == "relative":
-            goal = q0 + g * self.goal_scale
-        else:
-            goal = q0
+        if delay > 0 and np.any(dq0 != 0):
+            raise ValueError(f"dq0 must be zero when the start is delayed ({delay=}), got {dq0}")
+        dmp = _prodmp(self, tau, delay)
+        goal = np.zeros(self.n_dof) if g is None else g
         params = np.concatenate([w, goal[:, None]], axis=1).reshape(-1)
-        start_vel = dq0 if start == 0 else np.zeros(self.n_dof)
-        pos, vel = dmp.trajectory_numpy(params, q0, start_vel)
-        q[start:] = pos[: n + 1 - start]
-        dq[start:] = vel[: n + 1 - start]
-        return q, dq
+        return dmp.trajectory_numpy(params, q0, dq0)
 
 
 @lru_cache(maxsize=16)
-def _prodmp(
-    n_basis: int,
-    n_dof: int,
-    duration: float,
-    dt: float,
-    alpha: float,
-    tau: float,
-    alpha_phase: float,
-    width: float | None,
-) -> tuple[ProDMP, np.ndarray]:
-    """The ProDMP of one (duration, τ) and its basis functions' largest absolute values on
-    the grid (1 where a basis function is zero everywhere).
-
-    Building the basis integrates it numerically (about a millisecond); a task whose τ and
-    start time are fixed builds it once. A :class:`ProDMP` is not changed by its use.
-    """
-    dmp = ProDMP(
-        n_basis, n_dof, duration=duration, dt=dt, alpha=alpha, tau=tau, alpha_x=alpha_phase,
-        width=width,
-    )  # fmt: skip
-    peak = np.abs(dmp.basis_matrix()[:, :n_basis].numpy()).max(axis=0)
-    return dmp, np.where(peak > 0, peak, 1.0)
+def _prodmp(spec: ProDMPSpec, tau: float, delay: float) -> ProDMP:
+    """The ProDMP of one task and one (τ, delay). A task whose τ and start time are fixed
+    builds it once (the basis grid itself is shared through ``prodmp_basis``'s cache).
+    A :class:`ProDMP` is not changed by its use."""
+    return ProDMP(
+        spec.n_basis, spec.n_dof, duration=spec.n_steps * spec.dt, dt=spec.dt, alpha=spec.alpha,
+        tau=tau, alpha_x=spec.alpha_phase, bandwidth_factor=spec.bandwidth_factor, delay=delay,
+        basis_tau=spec.tau, rule=spec.rule, auto_scale_basis=spec.auto_scale_basis,
+        weights_scale=spec.weights_scale, goal_scale=spec.goal_scale,
+        relative_goal=spec.goal in ("relative", "disabled"),
+    )
 
 
 def promp_trajectory(

@@ -11,8 +11,8 @@ dt = 0.02 s; an episode has T = 200 control steps (4 s). The goal is the slide-j
 **Controller** (both tasks, CH3_CH4_FACTS §1): the movement primitive gives ``(q_d, q̇_d)``
 on the grid ``0, dt, ..., T·dt``; at control step t = 0..T−1 the command is
 ``a_t = clip(K_p (q_d[t+1] − q) + K_d (q̇_d[t+1] − q̇), −1, 1)`` with K_p = 1.0, K_d = 0.1,
-held for the two physics steps. Using the grid point at the *end* of the control interval
-is our choice (the primitive starts at q0, so q_d[0] would give a zero first command).
+held for the two physics steps. The grid point at the *end* of the control interval is what
+fancy-gym's black-box wrapper uses (it drops t = 0 from the trajectory).
 
 **Rewards** are evaluated on the state *after* the action of step t (so the last action
 moves the final state that the time-sparse terms score). The authors' code (and gym's

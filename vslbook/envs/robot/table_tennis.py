@@ -26,9 +26,9 @@ Parameters (23) and controller
     attractor is the start posture) with learned duration τ ∈ [0.56, 1.5] s and start time
     delay ∈ [0.05, 0.6] s (Di-SkilL's bounds). The robot starts at q0 = [0, 0, 0, 1.5, 0, 0, 1.5]
     at rest. Control step k (dt = 0.002 × 4 = 0.008 s, at most 350 steps = 2.8 s) applies
-    ``u = clip(K_p (q_d[k] - q) + K_d (q̇_d[k] - q̇), -1, 1)`` to the motors (gears
-    150, 125, 40, 60, 5, 5, 2), held for the 4 physics sub-steps; K_p = 0.5·[1, 4, 2, 4, 1, 4, 1],
-    K_d = 0.1·K_p; no gravity compensation.
+    ``u = clip(K_p (q_d - q) + K_d (q̇_d - q̇), -1, 1)``, q_d at time (k + 1)·dt, to the motors
+    (gears 150, 125, 40, 60, 5, 5, 2), held for the 4 physics sub-steps;
+    K_p = 0.5·[1, 4, 2, 4, 1, 4, 1], K_d = 0.1·K_p; no gravity compensation.
 
 Validity (before simulation)
     θ is rejected (not simulated, ``executed=False``) if τ or the delay lie outside their
@@ -80,7 +80,9 @@ Other places where the thesis was followed over the code or had to be interprete
     * Out-of-range contexts (SVSL's punishment, B.4.1.1 and A.3.3): -20 d_c², d_c the distance
       to the valid set (box, and the x/|y| interval the serve rules allow for the context's
       v_x, clipped into its range).
-    * The trajectory grid is 0, dt, ..., 2.8 s; step k tracks the grid point at k·dt.
+    * Step k tracks the primitive at (k + 1)·dt (fancy-gym's wrapper drops t = 0); the start
+      delay is continuous, as in mp_pytorch. (Until 2026-11 step k tracked k·dt and the
+      delay was rounded to the control grid.)
 """
 
 from __future__ import annotations
@@ -123,7 +125,7 @@ MODEL_PATCHES = (("</mujoco>", f"<sensor>{_SENSORS}</sensor></mujoco>"),)
 SUCCESS_RADIUS = 0.2
 
 SPEC = ProDMPSpec(
-    n_dof=7, n_basis=3, dt=DT, duration=MAX_STEPS * DT, alpha=25.0, alpha_phase=3.0,
+    n_dof=7, n_basis=3, dt=DT, duration=MAX_STEPS * DT, alpha=25.0, alpha_phase=3.0, tau=1.5,
     tau_bounds=TAU_BOUNDS, delay_bounds=DELAY_BOUNDS, goal="disabled", weights_scale=0.7,
 )  # fmt: skip
 
@@ -323,7 +325,8 @@ class TableTennis4D(EpisodicTask):
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         theta = np.asarray(theta, dtype=np.float64).reshape(self.n_params)
         context = np.asarray(context, dtype=np.float64).reshape(self.context_dim)
-        q_d, dq_d = self.spec.trajectory(theta, Q0)
+        # control step k tracks the primitive at (k + 1) dt (row 0 is the start state)
+        q_d, dq_d = (a[1:] for a in self.spec.trajectory(theta, Q0))
         penalty = trajectory_penalty(theta, q_d)
         if penalty < 0:
             return Episode(penalty, False, False, dict.fromkeys(self.info_keys, math.nan))

@@ -105,6 +105,17 @@ class PathRecorder:
         return {k: np.asarray(v, dtype=np.float64).reshape(-1, 3) for k, v in self._points.items()}
 
 
+def _options(cls: type) -> set[str]:
+    """The keyword arguments a task class takes: the named parameters of the ``__init__``
+    of every class along its MRO (a subclass passes its own on to this base)."""
+    import inspect
+
+    named = (inspect.Parameter.POSITIONAL_OR_KEYWORD, inspect.Parameter.KEYWORD_ONLY)
+    inits = [k.__dict__["__init__"] for k in cls.__mro__ if "__init__" in k.__dict__]
+    return {p.name for init in inits for p in inspect.signature(init).parameters.values()
+            if p.name != "self" and p.kind in named}  # fmt: skip
+
+
 class EpisodicTask:
     """Base class: subclasses set the class attributes and implement :meth:`episode`.
 
@@ -135,6 +146,13 @@ class EpisodicTask:
     _recorder: PathRecorder | None = None
 
     def __init__(self, **kwargs: Any) -> None:
+        known = _options(type(self))
+        unknown = sorted(set(kwargs) - known)
+        if unknown:
+            raise ValueError(
+                f"{type(self).__name__} has no option {', '.join(map(repr, unknown))}; "
+                f"expected some of {', '.join(sorted(known)) or '(none)'}"
+            )
         self._kwargs = dict(kwargs)
         self._pool: ProcessPoolExecutor | None = None
         self._pool_size = 0
