@@ -1,6 +1,7 @@
 """Beer Pong (thesis Section 3.4, Appendix A.3.2): layout, determinism, reward cases from
-placed ball states, validity checks before simulation, contexts, a throw into the cup, and the
-simulation loop (MuJoCo's PD actuators) held to a plain per-step loop of the control law."""
+placed ball states, validity checks before simulation, contexts, a throw into the cup, a ball
+that bounces off the cup's floor and out, and the simulation loop (MuJoCo's PD actuators) held
+to a plain per-step loop of the control law, under both readings of the reward."""
 
 from __future__ import annotations
 
@@ -21,6 +22,7 @@ from vslbook.envs.robot.beer_pong import (
     MODEL_PATCHES,
     P_GAINS,
     Q0,
+    REWARD_VARIANTS,
     BeerPong,
     beer_pong_reward,
     desired_trajectory,
@@ -41,9 +43,25 @@ SUCCESS_THETA = np.array([
 ])  # fmt: skip
 
 
+# The geoms whose contact with the ball separates A.3.2's cond. 2 from cond. 1 in the authors'
+# code (its table-top, wall and cup lists, written out by name) and in the thesis's text.
+CODE_CONTACT_NAMES = {
+    "table_contact_geom", "wall", "cup_base_table", "cup_base_table_contact",
+    *(f"cup_geom_table{i}" for i in (3, 4, 5, 6, 7, 8, 9, 10, 15, 16, 17)), "cup_geom1_table8",
+}  # fmt: skip
+THESIS_CONTACT_NAMES = {"table", "table_contact_geom"}
+
+
 @pytest.fixture(scope="module")
 def task() -> BeerPong:
     t = BeerPong()
+    yield t
+    t.close()
+
+
+@pytest.fixture(scope="module")
+def thesis_task() -> BeerPong:
+    t = BeerPong(reward="thesis")
     yield t
     t.close()
 
@@ -91,7 +109,22 @@ def _place_ball(task: BeerPong, pos: np.ndarray) -> tuple[bool, bool]:
     return task.ball_contacts()
 
 
-def test_contacts_from_placed_ball_states(task: BeerPong) -> None:
+def test_reward_variants_and_contact_geoms(task: BeerPong, thesis_task: BeerPong) -> None:
+    assert task.reward == "code" and REWARD_VARIANTS == ("code", "thesis")
+    names = {task.model.geom(int(g)).name for g in task.contact_geoms}
+    assert names == CODE_CONTACT_NAMES  # every collision geom of the cup, the table top, wall
+    names = {thesis_task.model.geom(int(g)).name for g in thesis_task.contact_geoms}
+    assert names == THESIS_CONTACT_NAMES
+    with pytest.raises(ValueError, match=r"reward must be one of 'code', 'thesis', got 'final'"):
+        BeerPong(reward="final")
+    from vslbook.envs.robot import make_task
+
+    t = make_task("beer-pong", reward="thesis")
+    assert t.reward == "thesis"
+    t.close()
+
+
+def test_contacts_from_placed_ball_states(task: BeerPong, thesis_task: BeerPong) -> None:
     task.reset(CONTEXT)
     top, bottom = task.cup_sites()
     # Cup placed at the context: its axis is 0.134 m along −y of the body origin.
@@ -99,13 +132,18 @@ def test_contacts_from_placed_ball_states(task: BeerPong) -> None:
     np.testing.assert_allclose(bottom, [0.0, -1.7 - 0.1337249, 0.865], atol=1e-6)
     assert top[2] > bottom[2]
     r = 0.025
-    # Resting on the cup floor: in the cup, no table contact.
-    assert _place_ball(task, bottom + [0, 0, r - 1e-3]) == (True, False)
-    # On the table, away from the cup.
     table_top = 0.4025 + 0.31 + 0.1
-    assert _place_ball(task, np.array([0.3, -1.4, table_top + r - 1e-3])) == (False, True)
-    # In the air above the cup: neither.
-    assert _place_ball(task, top + [0, 0, 0.2]) == (False, False)
+    # (in the cup, contact) under the authors' code / under the thesis's text
+    cases = [
+        (bottom + [0, 0, r - 1e-3], (True, True), (True, False)),  # on the cup floor
+        (np.array([0.3, -1.4, table_top + r - 1e-3]), (False, True), (False, True)),  # table
+        (np.array([0.0, -2.41 + r - 1e-3, 1.5]), (False, True), (False, False)),  # the wall
+        (np.array([0.0, -1.729, 0.92]), (False, True), (False, False)),  # the cup's outside
+        (top + [0, 0, 0.2], (False, False), (False, False)),  # in the air above the cup
+    ]
+    for pos, code, thesis in cases:
+        assert _place_ball(task, pos) == code, pos
+        assert _place_ball(thesis_task, pos) == thesis, pos
 
 
 def test_reward_cases() -> None:
@@ -205,23 +243,33 @@ TABLE_CASES = [
 ]  # fmt: skip
 
 
-def _plain_episode(m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_steps=500):
+def _plain_episode(
+    m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_steps=500, reward="code",
+    placed=None,
+):  # fmt: skip
     """The task's episode written as a plain per-step loop of the original law, on a model
     loaded as the task loads it but with its own motors left as they are (ctrl = 0: unused).
 
-    Each step: mj_step1 → while k ≤ n pin the ball to the hand site (position and linear
-    velocity) → u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias into qfrc_applied (after the
-    release q_d(l) with q̇_d = 0) → mj_step2. Table contact: any ball–table contact in the
-    contact list after release or at the end; in the cup: ball on the cup floor at the end.
+    Each step k: mj_step1 → while k ≤ n pin the ball to the hand site (position and linear
+    velocity; ``placed``: at k = n put the ball at the given position and velocity instead)
+    → u = K_p (q_d − q) + K_d (q̇_d − q̇) + qfrc_bias into qfrc_applied (after the release
+    q_d(l) with q̇_d = 0) → mj_step2. The contact list of step k's state (recomputed after
+    the pin) gives the geoms the ball touches. ``reward="code"`` (the authors' SVSL code): in
+    the cup if the ball touched the cup floor in the state of any step but the last, contact
+    with the table top, the wall or the cup likewise, success: on the cup floor in the last
+    step's state. ``"thesis"``: in the cup and success: on the cup floor at the end; contact:
+    with the table after release or at the end.
     """
     theta, context = np.asarray(theta, dtype=float), np.asarray(context, dtype=float)
     hand = m.site("init_ball_pos").id
     ball = m.geom("ball_geom").id
-    table = {m.geom("table").id, m.geom("table_contact_geom").id}
+    names = CODE_CONTACT_NAMES if reward == "code" else THESIS_CONTACT_NAMES
+    counted = {m.geom(name).id for name in names}
     floor = m.geom("cup_base_table_contact").id
+    side = mujoco.MjData(m)  # the contacts of a pinned state
 
-    def touched() -> set[int]:  # geoms the ball touches
-        pairs = [tuple(g) for g in d.contact.geom[: d.ncon]]
+    def touched(data: mujoco.MjData) -> set[int]:  # geoms the ball touches
+        pairs = [tuple(g) for g in data.contact.geom[: data.ncon]]
         return {b if a == ball else a for a, b in pairs if ball in (a, b)}
 
     mujoco.mj_resetData(m, d)
@@ -236,16 +284,22 @@ def _plain_episode(m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_st
     w = np.zeros((7, 4))
     w[:, 2:] = theta[1:].reshape(7, 2) * math.sqrt(0.02)
     q_d, dq_d = promp_trajectory(w, n * DT, DT, Q0, width=0.1)
-    balls, torques, table_contact = [], [], False
+    balls, torques, steps_touched = [], [], []
     for k in range(n + extra_steps):
         mujoco.mj_step1(m, d)
         if k <= n:
-            d.qpos[7:10] = d.site_xpos[hand]
-            v = np.zeros(6)
-            mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, hand, v, 0)
-            d.qvel[7:10] = v[3:]
-        elif touched() & table:
-            table_contact = True
+            if placed is not None and k == n:
+                d.qpos[7:10], d.qvel[7:10] = placed
+            else:
+                d.qpos[7:10] = d.site_xpos[hand]
+                v = np.zeros(6)
+                mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, hand, v, 0)
+                d.qvel[7:10] = v[3:]
+            side.qpos[:] = d.qpos
+            mujoco.mj_fwdPosition(m, side)
+            steps_touched.append(touched(side))
+        else:
+            steps_touched.append(touched(d))
         balls.append(d.qpos[7:10].copy())
         target, target_vel = (q_d[k], dq_d[k]) if k < n else (q_d[n], np.zeros(7))
         u = P_GAINS * (target - d.qpos[:7]) + D_GAINS * (target_vel - d.qvel[:7])
@@ -255,8 +309,14 @@ def _plain_episode(m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_st
         mujoco.mj_step2(m, d)
     mujoco.mj_forward(m, d)
     balls.append(d.qpos[7:10].copy())
-    final = touched()
-    in_cup, table_contact = floor in final, table_contact or bool(final & table)
+    final = touched(d)
+    if reward == "code":
+        in_cup = any(floor in t for t in steps_touched[:-1])
+        contact = any(t & counted for t in steps_touched[:-1])
+        success = floor in steps_touched[-1]
+    else:
+        in_cup = success = floor in final
+        contact = any(t & counted for t in steps_touched[n + 1 :]) or bool(final & counted)
     balls, torques = np.array(balls), np.array(torques)
     min_top = min(float(np.linalg.norm(b - top)) for b in balls)
     end_bottom = float(np.linalg.norm(balls[-1] - bottom))
@@ -264,12 +324,12 @@ def _plain_episode(m: mujoco.MjModel, d: mujoco.MjData, theta, context, extra_st
     if in_cup:
         ret = -(end_bottom**2) - 1.5e-4 * torque_cost
     else:
-        ret = (-2.0 if table_contact else -4.0) - min_top**2 - 0.5 * end_bottom**2
+        ret = (-2.0 if contact else -4.0) - min_top**2 - 0.5 * end_bottom**2
         ret -= 1e-4 * torque_cost
     return {
-        "ret": ret, "in_cup": in_cup, "table_contact": table_contact, "min_dist_top": min_top,
-        "final_dist_bottom": end_bottom, "torque_cost": torque_cost, "balls": balls,
-        "torques": torques,
+        "ret": ret, "in_cup": in_cup, "success": success, "table_contact": contact,
+        "min_dist_top": min_top, "final_dist_bottom": end_bottom, "torque_cost": torque_cost,
+        "balls": balls, "torques": torques,
     }  # fmt: skip
 
 
@@ -279,7 +339,9 @@ def plain_sim() -> tuple[mujoco.MjModel, mujoco.MjData]:
     return m, mujoco.MjData(m)
 
 
-def test_episodes_match_the_plain_loop(task: BeerPong, plain_sim) -> None:
+@pytest.mark.parametrize("reward", REWARD_VARIANTS)
+def test_episodes_match_the_plain_loop(task: BeerPong, thesis_task: BeerPong, plain_sim, reward):
+    task = task if reward == "code" else thesis_task
     rng = np.random.default_rng(7)
     random_cases = [
         (np.r_[rng.uniform(0.3, 1.0), rng.normal(0, 1.5, 14)], task.sample_contexts(1, rng)[0])
@@ -290,14 +352,17 @@ def test_episodes_match_the_plain_loop(task: BeerPong, plain_sim) -> None:
     contexts = np.array([c[1] for c in cases], dtype=float)
     r = task.evaluate(theta, contexts, workers=0)
     assert r.executed.all()
-    # both kinds of ending are covered: in the cup, and off the table
-    assert r.success[0] and r.info["table_contact"][1] == r.info["table_contact"][2] == 1.0
+    # both kinds of ending are covered: in the cup, and off the table. The second table
+    # case's ball hits the table's front face below its top geom: contact for the thesis's
+    # "table", none for the authors' code (it counts the top geom ``table_contact_geom`` only).
+    assert r.success[0] and r.info["table_contact"][1] == 1.0
+    assert r.info["table_contact"][2] == (1.0 if reward == "thesis" else 0.0)
     for i, (th, c) in enumerate(cases):
-        ref = _plain_episode(*plain_sim, th, c)
+        ref = _plain_episode(*plain_sim, th, c, reward=reward)
         # MuJoCo's actuators sum the same law in another order: the results agree to rounding
         # (up to ~3e-10 relative seen), not bit for bit
         assert r.returns[i] == pytest.approx(ref["ret"], rel=1e-7), i
-        assert r.success[i] == ref["in_cup"] and r.info["in_cup"][i] == float(ref["in_cup"]), i
+        assert r.success[i] == ref["success"] and r.info["in_cup"][i] == float(ref["in_cup"]), i
         assert r.info["table_contact"][i] == float(ref["table_contact"]), i
         for key in ("min_dist_top", "final_dist_bottom", "torque_cost"):
             assert r.info[key][i] == pytest.approx(ref[key], rel=1e-7), (i, key)
@@ -305,6 +370,49 @@ def test_episodes_match_the_plain_loop(task: BeerPong, plain_sim) -> None:
     np.testing.assert_allclose(task.ball_path, ref["balls"], rtol=0, atol=1e-7)
     scale = np.abs(ref["torques"]).max()
     np.testing.assert_allclose(task.torque_path, ref["torques"], rtol=1e-7, atol=1e-9 * scale)
+
+
+# A ball dropped into the cup by hand at the release of a short, nearly still movement: from
+# 6 cm above the floor's centre site and 3 cm off the axis towards −x, at (2.5, 0, −6) m/s.
+# It hits the cup's floor, bounces off it, leaves the cup, lands on the table and falls off it.
+BOUNCE_THETA = np.r_[0.1, np.zeros(14)]
+BOUNCE_OFFSET, BOUNCE_VEL = np.array([-0.03, 0.0, 0.06]), np.array([2.5, 0.0, -6.0])
+
+
+def test_ball_bouncing_off_the_cup_floor_and_out(task: BeerPong, thesis_task, plain_sim):
+    task.reset(CONTEXT)
+    top, bottom = task.cup_sites()
+    placed = (bottom + BOUNCE_OFFSET, BOUNCE_VEL)
+    ep = task.episode_with_ball(BOUNCE_THETA, CONTEXT, *placed)
+    balls, torques = task.ball_path.copy(), task.torque_path.copy()
+    assert ep.executed and len(balls) == 20 + 500 + 1
+    # the ball left the cup: it ends > 0.4 m off the cup's axis, below the table's top
+    end = balls[-1]
+    assert np.hypot(*(end - bottom)[:2]) > 0.4 and end[2] < 0.4025 + 0.31 + 0.1
+    # A.3.2 with the authors' in-cup test: cond. 3 since the ball touched the floor, by hand
+    # from the recorded path and torques
+    d_bottom = float(np.sqrt(np.sum((end - bottom) ** 2)))
+    tau = float(np.mean(np.sum(torques**2, axis=1)))
+    want = -(d_bottom**2) - 1.5e-4 * tau
+    assert ep.info["in_cup"] == 1.0 and not ep.success  # touched the floor, not in at the end
+    assert ep.ret == pytest.approx(want, rel=1e-9)
+    assert ep.ret == pytest.approx(-0.71, abs=0.01)
+    # the thesis's reading: not in the cup at the end, table contact: cond. 2
+    ept = thesis_task.episode_with_ball(BOUNCE_THETA, CONTEXT, *placed)
+    np.testing.assert_array_equal(thesis_task.ball_path, balls)
+    d_top = float(np.min(np.sqrt(np.sum((balls - top) ** 2, axis=1))))
+    want_thesis = -2.0 - d_top**2 - 0.5 * d_bottom**2 - 1e-4 * tau
+    assert ept.info["in_cup"] == 0.0 and ept.info["table_contact"] == 1.0 and not ept.success
+    assert ept.ret == pytest.approx(want_thesis, rel=1e-9)
+    assert ept.ret == pytest.approx(-2.37, abs=0.01)
+    # the plain loop agrees, under both readings
+    for e, reward in ((ep, "code"), (ept, "thesis")):
+        ref = _plain_episode(*plain_sim, BOUNCE_THETA, CONTEXT, reward=reward, placed=placed)
+        assert e.ret == pytest.approx(ref["ret"], rel=1e-7), reward
+        assert (e.success, e.info["in_cup"]) == (ref["success"], float(ref["in_cup"])), reward
+    # a bad ball state is refused, naming it
+    with pytest.raises(ValueError, match="ball_vel must be 3 finite numbers"):
+        task.episode_with_ball(BOUNCE_THETA, CONTEXT, bottom, [0.0, np.nan, 0.0])
 
 
 def test_trajectory_is_the_promp_of_the_package() -> None:

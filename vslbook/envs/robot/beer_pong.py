@@ -56,26 +56,40 @@ actuators: ctrl = 0 is not "no torque".
 
 **Reward** (A.3.2; the episode return):
 
-* cond. 1, not in the cup, no table contact:
+* cond. 1, not in the cup, no contact:
   −4 − min_t ‖p_c,top − p_b,t‖² − 0.5 ‖p_c,bottom − p_b,T‖² − 10⁻⁴ τ̄
-* cond. 2, not in the cup, table contact: −2 − (the same terms)
+* cond. 2, not in the cup, contact: −2 − (the same terms)
 * cond. 3, in the cup: −‖p_c,bottom − p_b,T‖² − 1.5·10⁻⁴ τ̄
 
 ⚠ The thesis prints cond. 3 without the minus signs; that would reward a large torque and
 distance, so we use the negated form of the authors' code (in the cup always beats not in
 the cup). τ̄ ("the squared mean torque") is, as in the code, the mean over all simulated
-steps of Σ_j u_j² with u the applied torque including the compensation term. "Table
-contact" follows the thesis: ball contact with the table's geoms (``table``,
-``table_contact_geom``) after release; the authors' code also counts cup and wall contacts.
-(The contacts are looked up after the loop, for the recorded states with the ball near the
-table, by recomputing those states' contact lists.)
-"In the cup" (cond. 3 and success) is ball contact with ``cup_base_table_contact`` in the
-final state; the code used any contact during the episode for cond. 3 and the final one for
-success — we use the thesis's single notion. The authors' −500 for "self-collision" (the arm
-hitting the table) is not in the thesis and is left out. An unstable simulation (non-finite
-state or MuJoCo's bad-acceleration warning) returns −30, simulated, unsuccessful (code). A
-non-finite or huge position or velocity in mid-episode shows only as MuJoCo's warning (it
-resets the data and goes on), so its bad-position and bad-velocity warnings count too.
+steps of Σ_j u_j² with u the applied torque including the compensation term.
+
+What "in the cup" and "contact" mean (``reward``):
+
+* ``"code"`` (default; the authors' SVSL code, which made Fig. 3.2): cond. 3 holds if the
+  ball touched the cup's floor geom ``cup_base_table_contact`` at any time of the episode,
+  so a ball that lands on the floor and bounces out again scores cond. 3 (with the distance
+  of wherever it ends up) instead of cond. 1 or 2's −2 or −4. "Contact" (cond. 2 vs 1) is
+  any contact of the ball with the table top ``table_contact_geom`` (not the table's body
+  ``table`` below it), the wall ``wall`` or any geom of the cup body ``cup_table`` (its
+  walls, base and floor), at any time (while in the hand too). Both are judged, as there,
+  on the contact lists of the states the steps start from (the states the loop records),
+  except the last step's: the authors' loop reads each step's list in the next iteration,
+  so the last one is read only by their success test. Success: the ball touches the cup's
+  floor in that last step's state.
+* ``"thesis"`` (A.3.2's text read literally): cond. 3 and success: the ball touches the
+  cup's floor in the final state; "contact" is "table contact": a contact of the ball with
+  the table's geoms (``table``, ``table_contact_geom``) after release or in the final state.
+
+(The contacts are looked up after the loop: for each recorded state with the ball near one
+of the geoms in question, its contact list is recomputed.) The authors' −500 for
+"self-collision" (the arm hitting the table) is not in the thesis and is left out.
+An unstable simulation (non-finite state or MuJoCo's bad-acceleration warning) returns −30,
+simulated, unsuccessful (code). A non-finite or huge position or velocity in mid-episode
+shows only as MuJoCo's warning (it resets the data and goes on), so its bad-position and
+bad-velocity warnings count too.
 
 **Validity before simulation** (A.3.2; not simulated, ``executed=False``):
 l < 0.1: −30 − 10 (l − 0.1)²; l > 1.3: −30 − 10 (l − 1.3)²; any q_d outside the joint
@@ -87,7 +101,9 @@ limits j_min = [−2.6, −1.985, −2.8, −0.9, −4.55, −1.5707, −2.7], j
 at 0, dt, ..., T (the rows of ``ball_path``, recorded by the loop; an unstable episode stops
 at its last step).
 
-**Success**: the ball is in the cup at the end. Info: ``in_cup``, ``table_contact``,
+**Success**: the ball is in the cup at the end (see ``reward`` above). Info: ``in_cup``
+(cond. 3 as the reward judged it), ``table_contact`` (the contact of cond. 2 as the reward
+judged it: under ``"code"`` with the table top, the wall or the cup),
 ``min_dist_top`` (min_t ‖p_c,top − p_b,t‖), ``final_dist_bottom`` (‖p_c,bottom − p_b,T‖),
 ``release_time`` (s), ``duration`` (l as given), ``torque_cost`` (τ̄). A rejected θ reports
 only ``duration`` (:class:`~vslbook.envs.robot.task.Rollouts` fills NaN for the rest; leaving
@@ -126,7 +142,14 @@ WEIGHTS_SCALE = math.sqrt(0.02)
 EXTRA_STEPS = 500
 INVALID_PENALTY = -30.0
 UNSTABLE_PENALTY = -30.0
+#: ``reward`` variants (module docstring): the authors' code (default) and A.3.2's text.
+REWARD_VARIANTS = ("code", "thesis")
+#: "Table contact" of A.3.2's text (``reward="thesis"``).
 TABLE_GEOMS = ("table", "table_contact_geom")
+#: The contacts of cond. 2 in the authors' code (``reward="code"``): these geoms and every
+#: collision geom of the cup body :data:`CUP_BODY`.
+CODE_CONTACT_GEOMS = ("table_contact_geom", "wall")
+CUP_BODY = "cup_table"
 CUP_FLOOR_GEOM = "cup_base_table_contact"
 #: MuJoCo's warnings of an unstable simulation: a non-finite or huge position or velocity
 #: (MuJoCo then resets the data, so the bad state itself is gone) or acceleration.
@@ -155,11 +178,13 @@ def beer_pong_reward(
     final_dist_bottom: float,
     torque_cost: float,
 ) -> float:
-    """The return of an executed episode (A.3.2, cond. 3 with the minus sign, see module doc).
+    """The return of an executed episode (A.3.2's R(θ, c), cond. 3 with the minus sign, see
+    the module docstring).
 
     Args:
-        in_cup: the ball rests in the cup at the end (cond. 3).
-        table_contact: the ball touched the table after release (cond. 2 vs cond. 1).
+        in_cup: cond. 3, the ball is in the cup (module docstring: when, per ``reward``).
+        table_contact: cond. 2 vs cond. 1, the ball had contact (module docstring: with
+            what, per ``reward``).
         min_dist_top: min_t ‖p_c,top − p_b,t‖ (not squared).
         final_dist_bottom: ‖p_c,bottom − p_b,T‖ (not squared).
         torque_cost: τ̄, the mean over steps of Σ_j u_j².
@@ -235,6 +260,8 @@ class BeerPong(EpisodicTask):
     Args:
         extra_steps: simulation steps after the release (default 500, the authors' code).
         weights_scale: factor on the learned ProMP weights (default √0.02).
+        reward: what "in the cup" and "contact" mean in the reward: ``"code"`` (default, the
+            authors' code) or ``"thesis"`` (A.3.2's text); see the module docstring.
     """
 
     name: ClassVar[str] = "beer-pong"
@@ -250,7 +277,11 @@ class BeerPong(EpisodicTask):
     path_names: ClassVar[tuple[str, ...]] = ("ball",)
 
     def __init__(
-        self, extra_steps: int = EXTRA_STEPS, weights_scale: float = WEIGHTS_SCALE, **kwargs: Any
+        self,
+        extra_steps: int = EXTRA_STEPS,
+        weights_scale: float = WEIGHTS_SCALE,
+        reward: str = "code",
+        **kwargs: Any,
     ) -> None:
         if isinstance(extra_steps, bool) or not isinstance(extra_steps, (int, np.integer)):
             raise ValueError(f"extra_steps must be an integer >= 1, got {extra_steps!r}")
@@ -260,9 +291,17 @@ class BeerPong(EpisodicTask):
             raise ValueError(f"weights_scale must be a finite number, got {weights_scale!r}")
         if weights_scale <= 0:
             raise ValueError(f"weights_scale must be positive, got {weights_scale!r}")
-        super().__init__(extra_steps=int(extra_steps), weights_scale=float(weights_scale), **kwargs)
+        if not isinstance(reward, str) or reward not in REWARD_VARIANTS:
+            raise ValueError(
+                f"reward must be one of {', '.join(map(repr, REWARD_VARIANTS))}, got {reward!r}"
+            )
+        super().__init__(
+            extra_steps=int(extra_steps), weights_scale=float(weights_scale), reward=reward,
+            **kwargs,
+        )  # fmt: skip
         self.extra_steps = int(extra_steps)
         self.weights_scale = float(weights_scale)
+        self.reward = reward
         self.model = load_model(MODEL, MODEL_PATCHES)
         if abs(self.model.opt.timestep - DT) > 1e-12:
             raise RuntimeError(f"{MODEL}: expected timestep {DT}, got {self.model.opt.timestep}")
@@ -274,17 +313,22 @@ class BeerPong(EpisodicTask):
         self._bottom = m.site("cup_goal_final_table").id
         self._cup = m.body("cup_table").id
         self._ball_geom = m.geom("ball_geom").id
-        self._table_geoms = np.array([m.geom(g).id for g in TABLE_GEOMS])
         self._floor_geom = m.geom(CUP_FLOOR_GEOM).id
-        # Box around the table's geoms, grown by the ball radius + 1 cm: contacts with the
-        # table are looked up only in states with the ball inside it (recomputing a state's
-        # contact list is costly).
-        d0 = mujoco.MjData(m)
-        mujoco.mj_forward(m, d0)
-        ids = self._table_geoms
-        grow = m.geom_size[self._ball_geom, 0] + 0.01
-        self._table_lo = np.min(d0.geom_xpos[ids] - m.geom_size[ids], axis=0) - grow
-        self._table_hi = np.max(d0.geom_xpos[ids] + m.geom_size[ids], axis=0) + grow
+        cup = m.body(CUP_BODY).id
+        cup_geoms = [
+            g for g in range(m.ngeom)
+            if m.geom_bodyid[g] == cup and (m.geom_contype[g] or m.geom_conaffinity[g])
+        ]  # fmt: skip
+        #: The geoms whose contact with the ball is cond. 2's "contact" (``reward``).
+        self.contact_geoms = np.array(
+            [m.geom(g).id for g in CODE_CONTACT_GEOMS] + cup_geoms
+            if reward == "code" else [m.geom(g).id for g in TABLE_GEOMS]
+        )  # fmt: skip
+        # The recorded states whose contact lists are recomputed after an episode (a costly
+        # step) are those with the ball inside a box around one of these geoms, grown by the
+        # ball's radius + 1 cm (boxes of the episode's cup position, :meth:`_near_boxes`).
+        self._near_geoms = np.unique(np.r_[self.contact_geoms, self._floor_geom])
+        self._near_grow = m.geom_rbound[self._ball_geom] + m.geom_margin[self._ball_geom] + 0.01
         self._vel = np.zeros(6)
         self._probe = mujoco.MjData(m)  # recomputes the contacts of recorded states
         # What the loop records of every step (mj_getState, one call): qpos, qvel and
@@ -324,20 +368,41 @@ class BeerPong(EpisodicTask):
         return self.data.site_xpos[self._top].copy(), self.data.site_xpos[self._bottom].copy()
 
     def ball_contacts(self, data: mujoco.MjData | None = None) -> tuple[bool, bool]:
-        """(ball touches the cup floor, ball touches the table) in ``data``'s contact list."""
+        """(ball touches the cup floor, ball has cond. 2's contact) in ``data``'s contact
+        list; the second is a contact with one of :attr:`contact_geoms` (``reward``)."""
         d = self.data if data is None else data
         if d.ncon == 0:
             return False, False
         g = d.contact.geom[: d.ncon]
         ball = (g == self._ball_geom).any(axis=1)
         other = np.where(g[:, 0] == self._ball_geom, g[:, 1], g[:, 0])[ball]
-        table0, table1 = self._table_geoms
         return bool((other == self._floor_geom).any()), bool(
-            ((other == table0) | (other == table1)).any()
+            np.isin(other, self.contact_geoms).any()
         )
 
     # -- episodes -----------------------------------------------------------------------
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
+        return self._episode(theta, context)
+
+    def episode_with_ball(self, theta: Any, context: Any, ball_pos: Any, ball_vel: Any) -> Episode:
+        """:meth:`episode`, except that at the release the ball does not leave the hand but is
+        put at ``ball_pos`` with linear velocity ``ball_vel`` (both (3,), world frame): a ball
+        placed and thrown by hand, for tests. The ball is placed in the state of the release
+        step after MuJoCo found its contacts, so during that one step it flies freely; it is
+        the state the step records (the path, the distances and the contact tests see it).
+        """
+        ball = []
+        for name, v in (("ball_pos", ball_pos), ("ball_vel", ball_vel)):
+            a = np.asarray(v, dtype=np.float64)
+            if a.shape != (3,) or not np.isfinite(a).all():
+                raise ValueError(f"{name} must be 3 finite numbers, got {v!r}")
+            ball.append(a)
+        return self._episode(theta, context, (ball[0], ball[1]))
+
+    def _episode(
+        self, theta: Any, context: Any, placed: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> Episode:
+        """The validity checks before simulation (A.3.2), then :meth:`_simulate`."""
         theta, context = self.episode_args(theta, context)
         duration = float(theta[0])
         pen = duration_penalty(duration)
@@ -346,16 +411,23 @@ class BeerPong(EpisodicTask):
         q_d, dq_d = desired_trajectory(theta, self.weights_scale)
         if np.any(q_d < J_MIN) or np.any(q_d > J_MAX):
             return Episode(INVALID_PENALTY, False, False, {"duration": duration})
-        return self._simulate(q_d, dq_d, context, duration)
+        return self._simulate(q_d, dq_d, context, duration, placed)
 
     def _simulate(
-        self, q_d: np.ndarray, dq_d: np.ndarray, context: np.ndarray, duration: float
+        self,
+        q_d: np.ndarray,
+        dq_d: np.ndarray,
+        context: np.ndarray,
+        duration: float,
+        placed: tuple[np.ndarray, np.ndarray] | None = None,
     ) -> Episode:
         """One executed episode (A.3.2): the control law and ball pin of the module docstring,
-        with the PD part in MuJoCo's actuators (:func:`use_pd_actuators`)."""
+        with the PD part in MuJoCo's actuators (:func:`use_pd_actuators`); ``placed``: the
+        ball's (position, velocity) put in at the release (:meth:`episode_with_ball`)."""
         m, d = self.model, self.data
         self.reset(context)
         top, bottom = self.cup_sites()
+        near_lo, near_hi = self._near_boxes()
         n = len(q_d) - 1
         n_total = n + self.extra_steps
         nq, nv = m.nq, m.nv
@@ -376,7 +448,8 @@ class BeerPong(EpisodicTask):
         step1, step2, objvel = mujoco.mj_step1, mujoco.mj_step2, mujoco.mj_objectVelocity
         record, spec = mujoco.mj_getState, self._row_spec
         site_type, hand = int(mujoco.mjtObj.mjOBJ_SITE), self._hand  # an int: faster than the enum
-        for row, ctrl_k in zip(rows[: n + 1], ctrls[: n + 1], strict=True):  # to release step n
+        held = n + 1 if placed is None else n  # steps with the ball in the hand
+        for row, ctrl_k in zip(rows[:held], ctrls[:held], strict=True):  # to release step n
             step1(m, d)
             # the ball held at the hand: its position and linear velocity
             ball_q[...] = hand_x
@@ -385,6 +458,13 @@ class BeerPong(EpisodicTask):
             ctrl[...] = ctrl_k  # at k = n the hold, left in place after the release
             applied[...] = bias  # gravity and Coriolis compensation, qfrc_bias of this step
             record(m, d, row, spec)
+            step2(m, d)
+        if placed is not None:  # the release step with the ball put in by hand
+            step1(m, d)
+            ball_q[...], ball_dq[...] = placed
+            ctrl[...] = ctrls[n]
+            applied[...] = bias
+            record(m, d, rows[n], spec)
             step2(m, d)
         for row in rows[n + 1 :]:  # the ball flies
             step1(m, d)
@@ -409,15 +489,24 @@ class BeerPong(EpisodicTask):
         torques -= np.multiply(rows[:, nq : nq + N_DOF], D_GAINS)
         torques += ctrls
         torques += rows[:, nq + nv : nq + nv + N_DOF]
-        table_contact = self._table_contact(rows[n + 1 :, :nq])
-        mujoco.mj_forward(m, d)  # contacts of the final state
+        mujoco.mj_forward(m, d)  # the final state (and its contacts)
         balls[n_total] = ball_q
         if path is not None:
             path(ball=ball_q)
         self.ball_path = balls  # Fig. 3.2g
         self.torque_path = torques  # the applied joint torques u of every step
-        in_cup, last_table = self.ball_contacts()
-        table_contact = table_contact or last_table
+        qpos = rows[:, :nq]
+        if self.reward == "code":  # the states the steps start from but the last (module doc)
+            in_cup, table_contact = self._touches(qpos[:-1], near_lo, near_hi, floor=True)
+            success = self._touches(qpos[-1:], near_lo, near_hi, floor=True)[0]
+        else:  # "thesis": the final state, and table contact after release
+            in_cup, last_table = self.ball_contacts()
+            success = in_cup
+            table = np.isin(self._near_geoms, self.contact_geoms)
+            table_contact = (
+                last_table
+                or self._touches(qpos[n + 1 :], near_lo[table], near_hi[table], floor=False)[1]
+            )
         x, y, z = (balls - top).T
         min_dist_top = math.sqrt((x * x + y * y + z * z).min())
         final_dist_bottom = math.dist(balls[-1], bottom)
@@ -432,23 +521,42 @@ class BeerPong(EpisodicTask):
             "duration": duration,
             "torque_cost": torque_cost,
         }
-        return Episode(float(ret), bool(in_cup), True, info)
+        return Episode(float(ret), bool(success), True, info)
 
-    def _table_contact(self, qpos: np.ndarray) -> bool:
-        """Whether the ball touches the table in any of the recorded states ``qpos`` (rows of
-        qpos after release, each the state that step's ``mj_step1`` found its contacts in).
+    def _near_boxes(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lo, hi), ``(k, 3)`` each: world boxes around the geoms whose contacts with the ball
+        the reward reads (the cup floor and :attr:`contact_geoms`, in the order of
+        ``_near_geoms``), in ``data``'s current state, grown by the ball's radius, the contact
+        margin and 1 cm. Outside all of them the ball touches none of these geoms."""
+        m, d = self.model, self.data
+        ids = self._near_geoms
+        rot = d.geom_xmat[ids].reshape(-1, 3, 3)
+        centre = d.geom_xpos[ids] + np.einsum("kij,kj->ki", rot, m.geom_aabb[ids, :3])
+        half = np.einsum("kij,kj->ki", np.abs(rot), m.geom_aabb[ids, 3:])
+        half += self._near_grow + m.geom_margin[ids, None]
+        return centre - half, centre + half
 
-        Only states with the ball inside the box around the table are looked at; their
-        contacts are recomputed on a second MjData by MuJoCo's position stage (a function of
-        qpos alone), which gives the contact list that ``mj_step1`` had.
+    def _touches(
+        self, qpos: np.ndarray, lo: np.ndarray, hi: np.ndarray, floor: bool
+    ) -> tuple[bool, bool]:
+        """(the ball touches the cup floor, the ball has cond. 2's contact) in any of the
+        recorded states ``qpos`` (rows of qpos, each the state that a step's ``mj_step1``
+        found its contacts in; ``floor=False``: the first is not looked for).
+
+        Only states with the ball inside one of the boxes ``lo``/``hi``
+        (:meth:`_near_boxes`) are looked at; their contacts are recomputed on a second
+        MjData by MuJoCo's position stage (a function of qpos alone), which gives the
+        contact list that ``mj_step1`` had.
         """
-        (x0, y0, z0), (x1, y1, z1) = self._table_lo, self._table_hi
-        x, y, z = qpos[:, 7], qpos[:, 8], qpos[:, 9]
-        inside = (x >= x0) & (x <= x1) & (y >= y0) & (y <= y1) & (z >= z0) & (z <= z1)
+        b = qpos[:, None, 7:10]
+        inside = ((b >= lo) & (b <= hi)).all(axis=2).any(axis=1)
         m, probe = self.model, self._probe
+        in_cup = contact = False
         for k in np.flatnonzero(inside):
             probe.qpos[:] = qpos[k]
             mujoco.mj_fwdPosition(m, probe)
-            if self.ball_contacts(probe)[1]:
-                return True
-        return False
+            f, c = self.ball_contacts(probe)
+            in_cup, contact = in_cup or (floor and f), contact or c
+            if contact and (in_cup or not floor):
+                break
+        return in_cup, contact
