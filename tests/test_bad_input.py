@@ -4,6 +4,7 @@ Nothing here trains: every call fails in validation, before a run directory exis
 """
 
 import dataclasses
+import re
 
 import pytest
 import torch
@@ -54,10 +55,14 @@ def test_unknown_env_id_names_it_and_suggests_close_matches(tmp_path):
     assert _empty(tmp_path / "runs")
 
 
-@pytest.mark.parametrize("seed", [-1, 2.5, "x", "3", True, None])
-def test_bad_seed_is_an_error_before_any_directory(tmp_path, seed):
-    with pytest.raises(ValueError, match=rf"seed must be a non-negative integer, got {seed!r}"):
-        run("erl-pg", ENV, seed, "smoke", root=tmp_path / "runs")
+@pytest.mark.parametrize("seed", [-1, 2.5, "x", "3", True, None, 2**32, 2**64])
+@pytest.mark.parametrize("algo,env", [("erl-pg", ENV), ("svsl", "vslbook/PlanarReacher-v0"),
+                                      ("dime", "dm_control/cheetah-run-v0")])  # fmt: skip
+def test_bad_seed_is_an_error_before_any_directory(tmp_path, seed, algo, env):
+    # one seed range for every algorithm: 0 <= seed < 2**32
+    with pytest.raises(ValueError, match=rf"seed must be an integer with 0 <= seed < 2\*\*32, "
+                       rf"got {re.escape(repr(seed))}"):  # fmt: skip
+        run(algo, env, seed, "smoke", root=tmp_path / "runs")
     assert _empty(tmp_path / "runs")
 
 
@@ -65,6 +70,7 @@ def test_check_seed_accepts_integers():
     import numpy as np
 
     assert check_seed(0) == 0 and check_seed(np.int64(7)) == 7
+    assert check_seed(2**32 - 1) == 2**32 - 1
 
 
 def test_cli_run_bad_env_and_seed(tmp_path, capsys):
@@ -73,11 +79,12 @@ def test_cli_run_bad_env_and_seed(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("vslbook: error: unknown environment 'cheetah-run'")
     assert "Traceback" not in err
-    for seed in ("-1", "2.5", "x"):
+    for seed in ("-1", "2.5", "x", str(2**32)):
         with pytest.raises(SystemExit) as exc:
             main(["run", "erl-pg", "--env", ENV, "--seed", seed, "--root", str(root)])
         assert exc.value.code == 2
-        assert f"argument --seed: expected an integer >= 0, got '{seed}'" in capsys.readouterr().err
+        err = capsys.readouterr().err
+        assert f"argument --seed: expected an integer with 0 <= seed < 2**32, got '{seed}'" in err
     assert _empty(root)
 
 
@@ -99,7 +106,7 @@ def test_sweep_checks_envs_and_seeds_before_submitting(tmp_path):
     root = tmp_path / "runs"
     with pytest.raises(ValueError, match=r"unknown environment 'vslbook/PointReach'; did you"):
         sweep("erl-pg", ["vslbook/PointReach"], [0], executor="debug", root=root)
-    with pytest.raises(ValueError, match=r"seed must be a non-negative integer, got -1"):
+    with pytest.raises(ValueError, match=r"seed must be an integer with 0 <= seed < 2\*\*32, got -1"):  # noqa: E501
         sweep("erl-pg", [ENV], [0, -1], executor="debug", root=root)
     assert _empty(root)
 

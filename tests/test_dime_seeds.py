@@ -55,6 +55,39 @@ def test_interrupted_mid_episode_resumes_exactly(tmp_path):
         assert b.done and _no_clocks(_rows(a)) == _no_clocks(_rows(b))
 
 
+@pytest.mark.parametrize("first", [True, False])
+def test_a_crash_between_two_seeds_checkpoints_resumes_exactly(tmp_path, monkeypatch, first):
+    """The stack writes its seeds' checkpoints one after another; a crash between two writes
+    leaves seed 3 a checkpoint ahead of seed 4. It rolls back to its previous checkpoint
+    (or, at the first checkpoint, starts afresh) so the two resume together, exactly."""
+    from vslbook.srl import dime_seeds
+
+    # the full budget, so that counts are env steps: a checkpoint every 40 of 400 steps
+    over = TINY | {"total_steps": 400, "eval_every": 100, "checkpoint_every": 40}
+    whole = run_seeds("dime", ENV, [3, 4], "full", root=tmp_path / "a", overrides=over,
+                      progress=False)  # fmt: skip
+    original = dime_seeds._Seed.checkpoint
+    crash_at = 40 if first else 120  # the first checkpoint of the stack, or the third
+
+    def crashing(self, stack, index, final=False):
+        if self.seed == 4 and self.step >= crash_at and not final:
+            raise KeyboardInterrupt("killed between the two seeds' checkpoints")
+        return original(self, stack, index, final)
+
+    monkeypatch.setattr(dime_seeds._Seed, "checkpoint", crashing)
+    with pytest.raises(KeyboardInterrupt):
+        run_seeds("dime", ENV, [3, 4], "full", root=tmp_path / "b", overrides=over,
+                  progress=False)  # fmt: skip
+    monkeypatch.setattr(dime_seeds._Seed, "checkpoint", original)
+    states = [rd / "checkpoint" / "state.pt" for rd in sorted((tmp_path / "b").glob("dime-*"))]
+    steps = [torch.load(p, weights_only=False)["step"] if p.exists() else 0 for p in states]
+    assert steps[0] > steps[1] and (steps[1] == 0) == first  # seed 3 ahead of seed 4
+    resumed = run_seeds("dime", ENV, [3, 4], "full", root=tmp_path / "b", overrides=over,
+                        progress=False)  # fmt: skip
+    for a, b in zip(whole, resumed, strict=True):
+        assert b.done and _no_clocks(_rows(a)) == _no_clocks(_rows(b))
+
+
 def test_a_single_seed_run_resumes_a_stacked_checkpoint(tmp_path):
     """The checkpoint format is the single-seed one (plus the cut episode's actions)."""
     (part,) = run_seeds("dime", ENV, [5], "smoke", root=tmp_path, overrides=TINY,
@@ -73,7 +106,7 @@ def test_bad_requests_are_clear_errors(tmp_path, capsys):
         run_seeds("erl-pg", "vslbook/PointReach-v0", [0, 1], root=tmp_path)
     with pytest.raises(ValueError, match=r"seeds must be distinct.*\[1, 1\]"):
         run_seeds("dime", ENV, [1, 1], root=tmp_path)
-    with pytest.raises(ValueError, match="seed must be a non-negative integer, got -1"):
+    with pytest.raises(ValueError, match=r"seed must be an integer with 0 <= seed < 2\*\*32, got -1"):  # noqa: E501
         run_seeds("dime", ENV, [0, -1], root=tmp_path)
     assert not any(tmp_path.iterdir())
     with pytest.raises(SystemExit):

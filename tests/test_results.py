@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import random
 
@@ -11,7 +12,7 @@ import pytest
 import torch
 
 from vslbook import data as results_data
-from vslbook import results
+from vslbook import results, rng_state
 from vslbook.data import DataIntegrityError
 from vslbook.results import RunDir
 
@@ -126,9 +127,72 @@ def test_load_checkpoint_truncates_later_metrics(run):
 
 
 def test_mark_done(run):
-    run.mark_done({"final_return": 12.5})
+    for step in (1, 2, 5):
+        run.log(step, x=step)
+    run.mark_done({"final_return": 12.5}, last_step=5)
     assert run.done
-    assert json.loads((run.path / "DONE").read_text()) == {"final_return": 12.5}
+    done = json.loads((run.path / "DONE").read_text())
+    lines = (run.path / "metrics.jsonl").read_bytes()
+    assert done["final_return"] == 12.5
+    assert done["metrics"] == {"rows": 3, "last_step": 5,
+                               "sha256": hashlib.sha256(lines).hexdigest()}  # fmt: skip
+    run.check_done()  # the metrics are what DONE recorded
+
+
+def test_done_needs_rows_that_cover_the_run(run):
+    with pytest.raises(RuntimeError, match="no rows in metrics.jsonl"):
+        run.mark_done()
+    run.log(1, x=1)
+    run.log(2, x=2)
+    with pytest.raises(RuntimeError, match="ends at step 2, expected 3"):
+        run.mark_done(last_step=3)
+    run.log(2, x=2)
+    with pytest.raises(RuntimeError, match=r"step 2 \(row 3\) follows step 2; rows repeat"):
+        run.mark_done()
+    assert not run.done
+
+
+@pytest.mark.parametrize("damage", ["delete", "truncate", "append", "only_done"])
+def test_a_done_that_its_metrics_do_not_back_is_an_error(tmp_path, damage):
+    rd = RunDir.create(tmp_path, CONFIG)
+    for step in range(1, 4):
+        rd.log(step, x=step)
+    rd.mark_done()
+    metrics = rd.path / "metrics.jsonl"
+    if damage == "delete":
+        metrics.unlink()
+    elif damage == "truncate":
+        metrics.write_text(metrics.read_text().splitlines(keepends=True)[0])
+    elif damage == "append":
+        rd.log(4, x=4)
+    else:  # a folder holding only DONE (written by hand or older code)
+        metrics.unlink()
+        (rd.path / "DONE").write_text("{}")
+    with pytest.raises(results.RunDirError, match=r"marked DONE but .*--restart"):
+        rd.check_done()
+
+
+def test_rewind_drops_rows_without_a_checkpoint_and_after_one(run):
+    for step in range(1, 4):
+        run.log(step, x=step)
+    assert run.rewind() == 3 and run.metrics() == []  # no checkpoint: the run starts over
+    for step in range(1, 4):
+        run.log(step, x=step)
+    run.save_checkpoint({"it": 3})
+    run.log(4, x=4)
+    assert run.rewind() == 0  # the checkpoint's own count is applied when it is loaded
+    assert run.load_checkpoint()["it"] == 3 and [r["step"] for r in run.metrics()] == [1, 2, 3]
+
+
+@pytest.mark.parametrize("content", [b"", b"PK\x03\x04 not a zip", b"garbage" * 10])
+def test_a_corrupt_checkpoint_is_one_line_naming_it(run, content):
+    run.log(1, x=1)
+    run.save_checkpoint({"it": 1})
+    run.checkpoint_path.write_bytes(content)
+    with pytest.raises(results.RunDirError) as err:
+        run.load_checkpoint()
+    message = str(err.value)
+    assert "\n" not in message and str(run.checkpoint_path) in message and "--restart" in message
 
 
 # --------------------------------------------------------------------------- RNG state
@@ -146,28 +210,28 @@ def _draws(gen):
 def test_rng_state_round_trip():
     gen = np.random.default_rng(1)
     _draws(gen)
-    state = results.rng_state(gen)
+    state = rng_state.rng_state(gen)
     first = [_draws(gen) for _ in range(3)]
     _draws(gen)
-    results.restore_rng_state(state, gen)
+    rng_state.restore_rng_state(state, gen)
     assert [_draws(gen) for _ in range(3)] == first
 
 
 def test_rng_state_survives_a_checkpoint(run):
     gen = np.random.default_rng(5)
-    run.save_checkpoint({"rng": results.rng_state(gen)})
+    run.save_checkpoint({"rng": rng_state.rng_state(gen)})
     expected = _draws(gen)
     other = np.random.default_rng(99)
-    results.restore_rng_state(run.load_checkpoint()["rng"], other)
+    rng_state.restore_rng_state(run.load_checkpoint()["rng"], other)
     assert _draws(other) == expected
 
 
 def test_restore_rng_state_rejects_mismatch():
     with pytest.raises(ValueError, match="missing keys"):
-        results.restore_rng_state({"python": None})
-    state = results.rng_state(None)
+        rng_state.restore_rng_state({"python": None})
+    state = rng_state.rng_state(None)
     with pytest.raises(ValueError, match="Generator"):
-        results.restore_rng_state(state, np.random.default_rng(0))
+        rng_state.restore_rng_state(state, np.random.default_rng(0))
 
 
 # --------------------------------------------------------------------------- data schema

@@ -1,6 +1,7 @@
 """Guards around training runs: divergence ends a run FAILED (never DONE) and statistics name
 the runs they could not use; a finished run is reused only by the code that produced it."""
 
+import hashlib
 import json
 import warnings
 
@@ -129,6 +130,25 @@ def test_finished_run_is_reused_only_by_the_same_code(tmp_path, capsys):
     env = json.loads((first.path / "env.json").read_text())
     env["code_hash"] = "0" * 64  # as if another version of the package had made it
     (first.path / "env.json").write_text(json.dumps(env))
+    # other code that gives the same numbers: its replay of the first rows matches, the run
+    # is kept (not retrained) and today's fingerprint is added to it
+    kept = run("dime", ENV, 0, "smoke", **kwargs)
+    assert kept.path == first.path and kept.code_matches
+    assert (first.path / "DONE").stat().st_mtime_ns == stamp
+    assert kept.env["code_hash"] == "0" * 64 and len(kept.env["code_hashes_verified"]) == 1
+    assert "replay identically with today's code: kept" in capsys.readouterr().out
+
+    # other code that gives other numbers: as if the recorded first row differed
+    env = json.loads((first.path / "env.json").read_text())
+    env["code_hash"], env["code_hashes_verified"] = "0" * 64, []
+    (first.path / "env.json").write_text(json.dumps(env))
+    lines = first.metrics_path.read_text().splitlines(keepends=True)
+    row = json.loads(lines[0])
+    row["eval_return"] = row["eval_return"] + 1.0
+    first.metrics_path.write_text(json.dumps(row) + "\n" + "".join(lines[1:]))
+    done = json.loads((first.path / "DONE").read_text())  # a DONE that backs these rows
+    done["metrics"]["sha256"] = hashlib.sha256(first.metrics_path.read_bytes()).hexdigest()
+    (first.path / "DONE").write_text(json.dumps(done))
     reused = run("dime", ENV, 0, "smoke", reuse_stale=True, **kwargs)
     assert reused.path == first.path and not reused.code_matches
     assert "WARNING" in capsys.readouterr().out
@@ -139,7 +159,8 @@ def test_finished_run_is_reused_only_by_the_same_code(tmp_path, capsys):
     assert fresh.env["code_excluded"] == sorted(("erl/", "envs/robot/"))
     moved = list((tmp_path / "_stale").iterdir())
     assert len(moved) == 1 and RunDir.open(moved[0]).code_hash == "0" * 64
-    assert "moved to" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "replay: row 1, eval_return:" in out and "moved to" in out
 
 
 def test_named_configurations_and_generated_differences():

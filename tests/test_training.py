@@ -131,3 +131,18 @@ def test_done_run_is_not_retrained(tmp_path):
 
 def test_gym_make_registered_id():
     assert "vslbook/PointReach-v0" in gym.registry
+
+
+def test_a_partial_run_made_by_other_code_that_replays_identically_resumes(tmp_path, capsys):
+    """A refactor must never cost a trained run: a partial run whose code fingerprint differs
+    is kept when today's code replays its first rows, and resumes exactly."""
+    full = run("erl-pg", ENV, seed=5, budget="smoke", root=tmp_path / "full", progress=False)
+    part = run("erl-pg", ENV, seed=5, budget="smoke", root=tmp_path / "part", progress=False,
+               stop_after=7)  # fmt: skip
+    env = json.loads((part.path / "env.json").read_text())
+    env["code_hash"] = "f" * 64
+    (part.path / "env.json").write_text(json.dumps(env))
+    resumed = run("erl-pg", ENV, seed=5, budget="smoke", root=tmp_path / "part", progress=False)
+    assert "replay identically with today's code: kept" in capsys.readouterr().out
+    assert resumed.done and _metrics(resumed) == _metrics(full)
+    assert not (tmp_path / "part" / "_stale").exists()

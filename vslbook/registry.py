@@ -48,6 +48,9 @@ class Algorithm:
         train_seeds: ``train_seeds(runs, records, budget, *, progress, stop_after) -> list``
             that trains several seeds in one process (``vslbook run ALGO --seeds 0 1 2``);
             None: one seed per process.
+        validate_env: ``validate_env(env)`` raises a clear ValueError for an env the
+            algorithm cannot train on (e.g. DIME on an episodic task without a bounded
+            action space); called before anything is written. None: ``envs`` decides.
     """
 
     name: str
@@ -58,6 +61,7 @@ class Algorithm:
     independent_of: tuple[str, ...] = ()
     defaults: Callable[..., Any] | None = None
     train_seeds: Callable[..., list] | None = None
+    validate_env: Callable[[str], None] | None = None
 
     def check_env(self, env: str) -> None:
         """Raise a clear error if ``env`` is not one this algorithm is meant for."""
@@ -66,6 +70,8 @@ class Algorithm:
                 f"algorithm {self.name!r} does not support env {env!r}; "
                 f"expected one of {', '.join(self.envs)}"
             )
+        if self.validate_env is not None:
+            self.validate_env(env)
 
     def default_config(self, env: str, budget: Any, overrides: dict[str, Any] | None) -> Any:
         """The configuration ``--set`` overrides apply to: the task's preset or ``config()``."""
@@ -97,10 +103,12 @@ def register_algorithm(
     independent_of: tuple[str, ...] = (),
     defaults: Callable[..., Any] | None = None,
     train_seeds: Callable[..., list] | None = None,
+    validate_env: Callable[[str], None] | None = None,
 ) -> Algorithm:
     algo = Algorithm(
         name=name, train=train, config=config, envs=tuple(envs), doc=doc,
         independent_of=tuple(independent_of), defaults=defaults, train_seeds=train_seeds,
+        validate_env=validate_env,
     )  # fmt: skip
     ALGORITHMS[name] = algo
     return algo
@@ -148,14 +156,20 @@ def get_algorithm(name: str) -> Algorithm:
     return ALGORITHMS[name]
 
 
+#: Seeds are 32-bit: numpy's legacy global RNG and gymnasium's spaces take at most 2**32 - 1,
+#: so one range holds for every algorithm.
+SEED_LIMIT = 2**32
+
+
 def check_seed(seed: Any) -> int:
-    """``seed`` as an int; a negative or non-integer seed (-1, 2.5, "x", True) is a clear error."""
+    """``seed`` as an int in ``[0, 2**32)``; anything else (-1, 2.5, "x", True, 2**32) is a
+    clear error."""
     import numbers
 
-    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral):
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    if seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+    if isinstance(seed, bool) or not isinstance(seed, numbers.Integral) or not (
+        0 <= seed < SEED_LIMIT
+    ):
+        raise ValueError(f"seed must be an integer with 0 <= seed < 2**32, got {seed!r}")
     return int(seed)
 
 
@@ -164,13 +178,13 @@ def check_run_request(spec: Algorithm, env: str, seed: Any) -> None:
 
     Raises:
         ValueError: for an env id neither vslbook nor gymnasium knows (with close matches),
-            one the algorithm is not meant for, or a seed that is not an integer >= 0.
+            one the algorithm is not meant for, or a seed outside ``[0, 2**32)``.
     """
     from vslbook.envs import check_env_id
 
+    check_seed(seed)
     check_env_id(env)
     spec.check_env(env)
-    check_seed(seed)
 
 
 def get_figure(fig_id: str) -> Figure:

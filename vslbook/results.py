@@ -7,7 +7,9 @@ A *run directory* holds everything one training run leaves behind::
         env.json          python, platform, host, package versions, git sha, start time
         metrics.jsonl     one JSON object per ``log`` call, appended, flushed and fsync'ed
         checkpoint/       state.pt, written to state.pt.tmp first and then renamed
-        DONE              written last, a JSON summary; its presence marks the run complete
+        LOCK              held (flock) by the process that trains the run: :mod:`vslbook.run_lock`
+        DONE              written last, a JSON summary with the rows it covers (count, last
+                          step, sha256 of metrics.jsonl); checked whenever the run is reused
         FAILED            written instead of DONE when a run diverged: step and quantity
 
 Code identity: ``env.json`` records :func:`code_fingerprint` (sha256 of the package's
@@ -18,147 +20,76 @@ reused only by the code that produced it (:func:`vslbook.training.run`).
 Resuming: :meth:`RunDir.save_checkpoint` records how many lines ``metrics.jsonl`` had at
 that moment and :meth:`RunDir.load_checkpoint` truncates the file back to that count, so
 rows logged between the checkpoint and an interruption are not duplicated when the run
-continues from the checkpoint. Together with :func:`rng_state` / :func:`restore_rng_state`
-stored in the checkpoint, a resumed run reproduces the numbers of an uninterrupted one.
+continues from the checkpoint; :meth:`RunDir.rewind` drops every row of a run that has no
+checkpoint yet (it starts again from its seed). Together with
+:func:`vslbook.rng_state.rng_state` stored in the checkpoint, a resumed run reproduces the
+numbers of an uninterrupted one. Opening a run for training (the lock, the stale-code rule,
+the rewind) is :func:`vslbook.run_open.open_run`.
 
 The ``data/`` tables are :mod:`vslbook.data`; code identity is :mod:`vslbook.provenance`.
 """
 
 from __future__ import annotations
 
-import hashlib
 import json
-import math
 import numbers
 import os
-import random
 import re
+import time
 from collections.abc import Mapping
-from dataclasses import asdict, is_dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
+from vslbook.jsonfiles import (
+    atomic_write,
+    canonical_json,
+    config_hash,
+    json_bytes,
+    metric_value,
+    plain_json,
+    read_json,
+)
 from vslbook.provenance import NOT_RUN_CODE, code_fingerprint
 from vslbook.provenance import environment as _environment
+from vslbook.run_errors import DivergenceError, RunDirError
+from vslbook.run_status import RunStatus
 
 __all__ = [
     "NOT_RUN_CODE",
     "DivergenceError",
     "RunDir",
+    "RunDirError",
     "code_fingerprint",
     "config_hash",
-    "restore_rng_state",
-    "rng_state",
 ]
 
 _NAME_OK = re.compile(r"[^A-Za-z0-9._-]+")
 
 
-class DivergenceError(RuntimeError):
-    """A training run produced a non-finite loss, value or parameter.
+#: The environment variable that caps the work a killed run can lose, in seconds.
+CHECKPOINT_SECONDS_ENV = "VSLBOOK_CHECKPOINT_SECONDS"
 
-    Attributes:
-        step: the environment step (or iteration) at which it was detected.
-        quantity: what was non-finite, e.g. ``"critic_loss"`` or ``"parameter policy.x"``.
-        value: the offending value as a float (nan or ±inf) where there is one.
+
+def checkpoint_seconds() -> float:
+    """Seconds of training between checkpoints at most: ``$VSLBOOK_CHECKPOINT_SECONDS``,
+    default 300. A checkpoint changes no number of a run, so this is not part of its config.
+
+    Raises:
+        ValueError: the variable is not a number >= 0.
     """
-
-    def __init__(self, step: int, quantity: str, value: float | None = None) -> None:
-        self.step, self.quantity, self.value = int(step), str(quantity), value
-        shown = "" if value is None else f" ({value})"
-        super().__init__(f"diverged at step {self.step}: non-finite {self.quantity}{shown}")
-
-
-# --------------------------------------------------------------------------- JSON helpers
-
-
-def _plain(value: Any, where: str = "config") -> Any:
-    """Convert ``value`` into plain JSON types (dataclasses, numpy, tuples, paths included)."""
-    if is_dataclass(value) and not isinstance(value, type):
-        return _plain(asdict(value), where)
-    if isinstance(value, Mapping):
-        out = {}
-        for key, item in value.items():
-            if not isinstance(key, str):
-                raise TypeError(f"{where}: keys must be strings, got {key!r}")
-            out[key] = _plain(item, f"{where}.{key}")
-        return out
-    if isinstance(value, (list, tuple)):
-        return [_plain(item, f"{where}[{i}]") for i, item in enumerate(value)]
-    if isinstance(value, np.ndarray):
-        return _plain(value.tolist(), where)
-    if isinstance(value, np.generic):
-        return _plain(value.item(), where)
-    if isinstance(value, Path):
-        return str(value)
-    if value is None or isinstance(value, (bool, int, str)):
-        return value
-    if isinstance(value, float):
-        if not math.isfinite(value):
-            raise ValueError(f"{where}: expected a finite number, got {value!r}")
-        return value
-    raise TypeError(
-        f"{where}: cannot store {value!r} of type {type(value).__name__} as JSON; "
-        "expected str, int, float, bool, None, list, dict, numpy value or dataclass"
-    )
-
-
-def _canonical_json(config: Mapping[str, Any]) -> str:
-    return json.dumps(_plain(config), sort_keys=True, separators=(",", ":"), allow_nan=False)
-
-
-def config_hash(config: Mapping[str, Any]) -> str:
-    """The sha256 (hex) of the canonical JSON form of ``config`` (sorted keys, no spaces)."""
-    if not isinstance(config, Mapping) and not is_dataclass(config):
-        raise TypeError(f"config must be a dict or a dataclass, got {type(config).__name__}")
-    return hashlib.sha256(_canonical_json(config).encode("utf-8")).hexdigest()
-
-
-def _atomic_write(path: Path, data: bytes) -> None:
-    """Write ``data`` to ``path`` through a temporary file, fsync, then rename."""
-    tmp = path.with_name(path.name + ".tmp")
-    with open(tmp, "wb") as fh:
-        fh.write(data)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(tmp, path)
-
-
-def _json_bytes(obj: Any) -> bytes:
-    return (json.dumps(obj, sort_keys=True, indent=2, allow_nan=False) + "\n").encode("utf-8")
-
-
-def _metric_value(key: str, value: Any) -> Any:
-    """A metric value as stored in ``metrics.jsonl``; non-finite floats become ``None``."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    elif hasattr(value, "item") and callable(value.item) and getattr(value, "ndim", None) == 0:
-        value = value.item()  # zero-dimensional numpy arrays and torch tensors
-    if value is None or isinstance(value, (bool, str)):
-        return value
-    if isinstance(value, numbers.Integral):
-        return int(value)
-    if isinstance(value, numbers.Real):
-        value = float(value)
-        return value if math.isfinite(value) else None
-    raise TypeError(
-        f"metric {key!r}: expected an int, float, str, bool or None, "
-        f"got {value!r} of type {type(value).__name__}"
-    )
+    text = os.environ.get(CHECKPOINT_SECONDS_ENV, "300")
+    try:
+        value = float(text)
+    except ValueError:
+        value = -1.0
+    if not value >= 0:
+        raise ValueError(f"${CHECKPOINT_SECONDS_ENV} must be seconds >= 0, got {text!r}")
+    return value
 
 
 # --------------------------------------------------------------------------- run directory
-
-
-def _default_name(config: Mapping[str, Any]) -> str:
-    parts = [str(config[key]) for key in ("algo", "env") if key in config]
-    if "seed" in config:
-        parts.append(f"s{config['seed']}")
-    parts.append(config_hash(config)[:8])
-    return _NAME_OK.sub("_", "-".join(parts))
 
 
 def _config_diff(old: Mapping[str, Any], new: Mapping[str, Any]) -> str:
@@ -173,7 +104,7 @@ def _config_diff(old: Mapping[str, Any], new: Mapping[str, Any]) -> str:
     return "\n".join(lines)
 
 
-class RunDir:
+class RunDir(RunStatus):
     """One run's directory: config, environment, metrics, checkpoint and completion mark.
 
     Create a new one (or reopen a matching one to resume) with :meth:`create`; open an
@@ -190,6 +121,15 @@ class RunDir:
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
+        self._saved_at = time.monotonic()
+        #: the run's :class:`vslbook.run_lock.RunLock` while this process trains it
+        self.lock: Any = None
+
+    def release(self) -> None:
+        """Let go of the run's lock, if this object holds it (idempotent)."""
+        if self.lock is not None:
+            self.lock.release()
+            self.lock = None
 
     def __repr__(self) -> str:
         return f"RunDir({str(self.path)!r})"
@@ -223,11 +163,11 @@ class RunDir:
                 lists the keys that differ), or ``name`` is not a plain directory name.
             FileExistsError: the directory exists and ``exist_ok_resume`` is False.
         """
-        plain = _plain(config)
+        plain = plain_json(config)
         if not isinstance(plain, dict):
             raise TypeError(f"config must be a dict or a dataclass, got {type(config).__name__}")
         if name is None:
-            name = _default_name(plain)
+            name = cls.name_for(plain)
         elif not name or name in (".", "..") or _NAME_OK.search(name):
             raise ValueError(
                 f"run name {name!r} is not a plain directory name; "
@@ -236,8 +176,8 @@ class RunDir:
         run = cls(Path(root) / name)
         config_file = run.path / cls.CONFIG
         if config_file.exists():
-            existing = json.loads(config_file.read_text(encoding="utf-8"))
-            if _canonical_json(existing) != _canonical_json(plain):
+            existing = read_json(config_file)
+            if canonical_json(existing) != canonical_json(plain):
                 raise ValueError(
                     f"run directory {run.path} already exists with a different config:\n"
                     f"{_config_diff(existing, plain)}\n"
@@ -249,9 +189,20 @@ class RunDir:
                 )
             return run
         run.path.mkdir(parents=True, exist_ok=True)
-        _atomic_write(run.path / cls.ENV, _json_bytes(_environment(tuple(code_exclude))))
-        _atomic_write(config_file, _json_bytes(plain))
+        atomic_write(run.path / cls.ENV, json_bytes(_environment(tuple(code_exclude))))
+        atomic_write(config_file, json_bytes(plain))
         return run
+
+    @staticmethod
+    def name_for(config: Mapping[str, Any]) -> str:
+        """The default directory name of ``config``: ``{algo}-{env}-s{seed}-{hash8}`` from
+        the keys ``algo``, ``env`` and ``seed`` where present (what :meth:`create` uses)."""
+        plain = plain_json(config)
+        parts = [str(plain[key]) for key in ("algo", "env") if key in plain]
+        if "seed" in plain:
+            parts.append(f"s{plain['seed']}")
+        parts.append(config_hash(plain)[:8])
+        return _NAME_OK.sub("_", "-".join(parts))
 
     @classmethod
     def open(cls, path: str | os.PathLike[str]) -> RunDir:
@@ -273,12 +224,14 @@ class RunDir:
     @property
     def config(self) -> dict[str, Any]:
         """The stored ``config.json``."""
-        return json.loads((self.path / self.CONFIG).read_text(encoding="utf-8"))
+        return read_json(self.path / self.CONFIG)
 
     @property
     def env(self) -> dict[str, Any]:
-        """The stored ``env.json``."""
-        return json.loads((self.path / self.ENV).read_text(encoding="utf-8"))
+        """The stored ``env.json`` (``{}`` when it is missing: nothing then says which code
+        made the run, so :attr:`code_matches` is False)."""
+        path = self.path / self.ENV
+        return read_json(path) if path.exists() else {}
 
     @property
     def config_hash(self) -> str:
@@ -301,7 +254,7 @@ class RunDir:
         if isinstance(step, bool) or not isinstance(step, numbers.Integral) or step < 0:
             raise ValueError(f"step must be a non-negative integer, got {step!r}")
         row = {"step": int(step)}
-        row.update({key: _metric_value(key, value) for key, value in metrics.items()})
+        row.update({key: metric_value(key, value) for key, value in metrics.items()})
         line = json.dumps(row, allow_nan=False, separators=(",", ":")) + "\n"
         self._drop_torn_tail()
         with open(self.metrics_path, "a", encoding="utf-8") as fh:
@@ -319,7 +272,7 @@ class RunDir:
             if fh.read(1) == b"\n":
                 return
         data = path.read_bytes()
-        _atomic_write(path, data[: data.rfind(b"\n") + 1])
+        atomic_write(path, data[: data.rfind(b"\n") + 1])
 
     def _metric_lines(self) -> list[str]:
         """Complete lines of ``metrics.jsonl`` (a torn last line from a crash is dropped)."""
@@ -354,11 +307,17 @@ class RunDir:
     def checkpoint_path(self) -> Path:
         return self.path / self.CHECKPOINT_DIR / self.CHECKPOINT
 
-    def save_checkpoint(self, state: Mapping[str, Any]) -> Path:
+    def save_checkpoint(self, state: Mapping[str, Any], *, keep_previous: bool = False) -> Path:
         """Atomically save ``state`` (torch.save) to ``checkpoint/state.pt``.
 
         The saved state also carries ``"_metrics_lines"``: the number of lines in
         ``metrics.jsonl`` at this moment (the caller's dict is not modified).
+
+        Args:
+            keep_previous: keep the checkpoint this one replaces as ``state.pt.prev``
+                (:meth:`load_checkpoint` with ``previous=True``): runs that checkpoint one
+                after another (the seed axis) roll back to a common step after a crash
+                between their writes. ``state.pt`` exists at every moment.
         """
         import torch
 
@@ -373,11 +332,25 @@ class RunDir:
             torch.save(payload, fh)
             fh.flush()
             os.fsync(fh.fileno())
+        if keep_previous and target.exists():  # a second name for the old file, then swap
+            prev = target.with_name(target.name + ".prev")
+            link = prev.with_name(prev.name + ".tmp")
+            link.unlink(missing_ok=True)
+            os.link(target, link)
+            os.replace(link, prev)
         os.replace(tmp, target)
+        self._saved_at = time.monotonic()
         return target
 
-    def load_checkpoint(self) -> dict[str, Any] | None:
-        """Load the checkpoint, or return None if there is none.
+    def checkpoint_due(self) -> bool:
+        """True when :func:`checkpoint_seconds` have passed since this object last saved a
+        checkpoint (or was made): the training loops then checkpoint before their own
+        schedule comes round, so a killed run loses at most that much work."""
+        return time.monotonic() - self._saved_at >= checkpoint_seconds()
+
+    def load_checkpoint(self, *, previous: bool = False) -> dict[str, Any] | None:
+        """Load the checkpoint (with ``previous``, the one before it, kept by
+        ``save_checkpoint(keep_previous=True)``), or return None if there is none.
 
         ``metrics.jsonl`` is truncated back to the number of lines it had when the
         checkpoint was saved, so a resumed run does not log those steps twice.
@@ -387,137 +360,48 @@ class RunDir:
         """
         import torch
 
-        if not self.checkpoint_path.exists():
+        path = self.checkpoint_path
+        if previous:
+            path = path.with_name(path.name + ".prev")
+        if not path.exists():
             return None
-        state = torch.load(self.checkpoint_path, map_location="cpu", weights_only=False)
-        keep = int(state.get("_metrics_lines", 0))
+        try:
+            state = torch.load(path, map_location="cpu", weights_only=False)
+        except Exception as err:  # noqa: BLE001 - torch raises many kinds for a bad file
+            raise RunDirError(
+                f"checkpoint {path} is unreadable ({type(err).__name__}: "
+                f"{str(err)[:120]}); rerun with --restart to move run {self.name} aside and "
+                "train it afresh"
+            ) from None
+        if not isinstance(state, dict) or "_metrics_lines" not in state:
+            raise RunDirError(
+                f"checkpoint {path} is not a run checkpoint (no metrics "
+                f"count in it); rerun with --restart to move run {self.name} aside"
+            )
+        keep = int(state["_metrics_lines"])
         lines = self._metric_lines()
         if len(lines) < keep:
-            raise ValueError(
+            raise RunDirError(
                 f"{self.metrics_path} has {len(lines)} lines but the checkpoint "
-                f"{self.checkpoint_path} was saved after {keep}; the metrics file was altered"
+                f"{path} was saved after {keep}; the metrics file was altered"
             )
         raw = self.metrics_path.read_bytes() if self.metrics_path.exists() else b""
         kept = "".join(line + "\n" for line in lines[:keep]).encode("utf-8")
         if raw != kept:
-            _atomic_write(self.metrics_path, kept)
+            atomic_write(self.metrics_path, kept)
         return state
 
-    # -- completion ---------------------------------------------------------------------
+    def rewind(self) -> int:
+        """Drop the rows a resumed run will log again; returns how many were dropped.
 
-    def mark_done(self, summary: Mapping[str, Any] | None = None) -> None:
-        """Write ``DONE`` (a JSON summary); call it as the run's very last step.
-
-        Raises:
-            RuntimeError: the run is marked FAILED (a diverged run is never DONE).
+        With a checkpoint, the rows after it (:meth:`load_checkpoint` does the same when it
+        loads); without one, every row: the run starts again from its seed. Only the
+        process that holds the run's lock may call it (:func:`vslbook.run_open.open_run`).
         """
-        if self.failed:
-            raise RuntimeError(f"{self.path} is marked FAILED ({self.failure}); it cannot be DONE")
-        _atomic_write(self.path / self.DONE, _json_bytes(_plain(dict(summary or {}), "summary")))
-
-    @property
-    def done(self) -> bool:
-        """True once :meth:`mark_done` has been called."""
-        return (self.path / self.DONE).is_file()
-
-    def mark_failed(self, error: DivergenceError | Mapping[str, Any]) -> None:
-        """Write ``FAILED`` (JSON: step, quantity, value, message) for a diverged run."""
-        if isinstance(error, DivergenceError):
-            info = {"step": error.step, "quantity": error.quantity, "message": str(error),
-                    "value": None if error.value is None else repr(error.value)}  # fmt: skip
-        else:
-            info = dict(error)
-        _atomic_write(self.path / self.FAILED, _json_bytes(_plain(info, "failure")))
-
-    @property
-    def failed(self) -> bool:
-        """True when the run diverged and was marked FAILED."""
-        return (self.path / self.FAILED).is_file()
-
-    @property
-    def failure(self) -> dict[str, Any] | None:
-        """The FAILED record (step, quantity, value, message), or None."""
-        if not self.failed:
-            return None
-        return json.loads((self.path / self.FAILED).read_text(encoding="utf-8"))
-
-    @property
-    def status(self) -> str:
-        """``"done"``, ``"failed"`` or ``"incomplete"``."""
-        return "failed" if self.failed else "done" if self.done else "incomplete"
-
-    @property
-    def code_hash(self) -> str | None:
-        """The :func:`code_fingerprint` recorded when the run was created (None if older)."""
-        try:
-            return self.env.get("code_hash")
-        except FileNotFoundError:
-            return None
-
-    @property
-    def code_matches(self) -> bool:
-        """True when the run was created by the code that is running now.
-
-        Compared over the same files as when the run was created: ``env.json`` records
-        which package paths its fingerprint left out.
-        """
-        try:
-            exclude = tuple(self.env.get("code_excluded", ()))
-        except FileNotFoundError:
-            exclude = ()
-        return self.code_hash == code_fingerprint(exclude)
-
-
-# --------------------------------------------------------------------------- RNG state
-
-
-def rng_state(generator: np.random.Generator | None = None) -> dict[str, Any]:
-    """Capture python's ``random``, numpy's global RNG, ``generator`` and torch's RNGs.
-
-    The result is picklable and meant to be stored in a checkpoint; pass it and the same
-    generator to :func:`restore_rng_state` to continue the exact same random stream.
-    """
-    import torch
-
-    if generator is not None and not isinstance(generator, np.random.Generator):
-        raise TypeError(
-            f"generator must be a numpy.random.Generator or None, got {type(generator).__name__}"
-        )
-    return {
-        "python": random.getstate(),
-        "numpy_global": np.random.get_state(),  # noqa: NPY002 - the legacy global state itself
-        "generator": None if generator is None else generator.bit_generator.state,
-        "torch": torch.get_rng_state(),
-        "torch_cuda": torch.cuda.get_rng_state_all() if torch.cuda.is_available() else None,
-    }
-
-
-def restore_rng_state(
-    state: Mapping[str, Any], generator: np.random.Generator | None = None
-) -> None:
-    """Restore the RNG states captured by :func:`rng_state` (into ``generator`` as well).
-
-    Raises:
-        ValueError: ``state`` is not from :func:`rng_state`, or a generator state is
-            present but no generator given (or the other way round).
-    """
-    import torch
-
-    missing = {"python", "numpy_global", "generator", "torch"} - set(state)
-    if missing:
-        raise ValueError(
-            f"not an rng_state() dict: missing keys {sorted(missing)}; got {sorted(state)}"
-        )
-    if (state["generator"] is None) != (generator is None):
-        raise ValueError(
-            "the captured state and the call disagree on the numpy Generator: captured "
-            f"{'none' if state['generator'] is None else 'one'}, given "
-            f"{'none' if generator is None else type(generator).__name__}"
-        )
-    random.setstate(state["python"])
-    np.random.set_state(state["numpy_global"])  # noqa: NPY002 - restoring the global state
-    if generator is not None:
-        generator.bit_generator.state = state["generator"]
-    torch.set_rng_state(state["torch"])
-    if state.get("torch_cuda") is not None and torch.cuda.is_available():
-        torch.cuda.set_rng_state_all(state["torch_cuda"])
+        lines = self._metric_lines()
+        if self.checkpoint_path.exists():
+            return 0  # load_checkpoint truncates to the count saved in the checkpoint
+        raw = self.metrics_path.read_bytes() if self.metrics_path.exists() else b""
+        if raw:
+            atomic_write(self.metrics_path, b"")
+        return len(lines)

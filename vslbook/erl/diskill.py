@@ -387,6 +387,7 @@ def train(
     callback: Callback | None = None,
     checkpoint: Callable[[DiSkill], None] | None = None,
     checkpoint_every: int = 25,
+    checkpoint_due: Callable[[], bool] | None = None,
     workers: int | None = None,
 ) -> DiSkill:
     """Algorithm 2, resumable: continue ``state`` if given.
@@ -400,20 +401,23 @@ def train(
         callback: ``callback(iteration, metrics)`` after every iteration (with the
             evaluation's numbers every ``test_every`` iterations and after the last).
         checkpoint: ``checkpoint(model)`` every ``checkpoint_every`` iterations and at the end.
+        checkpoint_due: also checkpoint when it returns True (a run directory's
+            :meth:`~vslbook.results.RunDir.checkpoint_due`: a time limit on lost work).
     """
     s = state if state is not None else DiSkill(task, config, seed, workers)
     cfg = s.config
     stop = cfg.iterations if until is None else min(until, cfg.iterations)
     if s.iteration == 0 and stop > 0 and callback is not None:
-        callback(0, {"samples": 0, "episodes": 0} | s.test())  # the initial policy
-        if checkpoint is not None:
-            checkpoint(s)
+        # the initial policy; no checkpoint here: a run stopped before its first one starts
+        # again from its seed (its rows dropped), so step 0 is never logged twice
+        callback(0, {"samples": 0, "episodes": 0} | s.test())
     while s.iteration < stop:  # line 1
         metrics = s.iterate()  # lines 2-8
         if s.iteration % cfg.test_every == 0 or s.iteration == cfg.iterations:
             metrics |= s.test()
         if callback is not None:
             callback(s.iteration, metrics)
-        if checkpoint is not None and (s.iteration % checkpoint_every == 0 or s.iteration == stop):
+        due = s.iteration % checkpoint_every == 0 or s.iteration == stop
+        if checkpoint is not None and (due or (checkpoint_due is not None and checkpoint_due())):
             checkpoint(s)
     return s

@@ -25,7 +25,8 @@ from tqdm.auto import tqdm
 from vslbook.budget import Budget
 from vslbook.envs import make
 from vslbook.registry import config_from_record, register_algorithm
-from vslbook.results import RunDir, restore_rng_state, rng_state
+from vslbook.results import RunDir
+from vslbook.rng_state import restore_rng_state, rng_state
 
 
 @dataclass(frozen=True)

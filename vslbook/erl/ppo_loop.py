@@ -34,7 +34,7 @@ from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 from tqdm.auto import tqdm
 
-from vslbook.results import restore_rng_state, rng_state
+from vslbook.rng_state import restore_rng_state, rng_state
 
 __all__ = [
     "CHECKPOINT_FILE",

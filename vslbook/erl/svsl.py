@@ -355,6 +355,7 @@ def train(
     callback: Callback | None = None,
     checkpoint: Callable[[SVSL], None] | None = None,
     checkpoint_every: int = 50,
+    checkpoint_due: Callable[[], bool] | None = None,
 ) -> SVSL:
     """Algorithm 1 (Appendix A.2), resumable: continue ``state`` if given.
 
@@ -366,6 +367,8 @@ def train(
         until: stop after this many iterations in total (default: all of them).
         callback: ``callback(iteration, metrics)`` after every iteration.
         checkpoint: ``checkpoint(svsl)`` every ``checkpoint_every`` iterations and at the end.
+        checkpoint_due: also checkpoint when it returns True (a run directory's
+            :meth:`~vslbook.results.RunDir.checkpoint_due`: a time limit on lost work).
     """
     s = state if state is not None else SVSL(task, config, seed)
     cfg = s.config
@@ -400,7 +403,8 @@ def train(
             metrics |= s.test()
         if callback is not None:
             callback(s.iteration, metrics)
-        if checkpoint is not None and (s.iteration % checkpoint_every == 0 or s.iteration == stop):
+        due = s.iteration % checkpoint_every == 0 or s.iteration == stop
+        if checkpoint is not None and (due or (checkpoint_due is not None and checkpoint_due())):
             checkpoint(s)
     return s
 
@@ -427,18 +431,15 @@ def run(
     Returns the run directory.
     """
     from vslbook.envs.robot import make_task
-    from vslbook.results import RunDir
+    from vslbook.run_open import open_run
 
     kwargs = dict(task_kwargs or {})
     task = make_task(task_name, **kwargs)
     record = {"algo": "svsl", "env": task_name, "task_kwargs": kwargs, "seed": int(seed)}
     record |= asdict(config)
-    rd = RunDir.create(root, record, code_exclude=CODE_EXCLUDE)
-    if not rd.code_matches:  # made by other code: moved aside (or reused, see reuse_stale)
-        from vslbook.training import _stale
-
-        rd = _stale(rd, root, record, reuse_stale, CODE_EXCLUDE)
+    rd = open_run(root, record, code_exclude=CODE_EXCLUDE, reuse_stale=reuse_stale)
     if rd.done:
+        rd.release()
         return rd.path
     s = SVSL(task, config, int(seed))
     saved = rd.load_checkpoint()
@@ -459,6 +460,7 @@ def run(
         train(
             task, config, int(seed), state=s, callback=log,
             checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
+            checkpoint_due=rd.checkpoint_due,
             checkpoint_every=checkpoint_every,
         )  # fmt: skip
     finally:
@@ -466,4 +468,5 @@ def run(
             bar.close()
         task.close()
     rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
+    rd.release()
     return rd.path

@@ -215,6 +215,7 @@ def train_svsl(
             train_loop(
                 task, config, seed, state=s, until=until, callback=log,
                 checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
+                checkpoint_due=rd.checkpoint_due,
             )  # fmt: skip
     finally:
         task.close()

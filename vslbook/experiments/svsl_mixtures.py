@@ -177,6 +177,7 @@ def _run_svsl(
         train_svsl(
             task, config, seed, state=s, callback=log,
             checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
+            checkpoint_due=rd.checkpoint_due,
             checkpoint_every=50,
         )  # fmt: skip
     rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})

@@ -193,6 +193,7 @@ def _run_svsl(
         train(
             task, config, int(seed), state=s, callback=log,
             checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
+            checkpoint_due=rd.checkpoint_due,
             checkpoint_every=max(config.test_every, 50),
         )  # fmt: skip
     finally:

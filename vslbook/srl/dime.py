@@ -45,7 +45,8 @@ from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.registry import config_from_record, register_algorithm
-from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
+from vslbook.results import DivergenceError, RunDir
+from vslbook.rng_state import restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
 from vslbook.srl.cuda_graphs import GraphedUpdates, graphs_wanted
 from vslbook.srl.dime_config import CrossQConfig, DIMEConfig, DIMEGaussianConfig
@@ -109,6 +110,11 @@ def make_env(env_id: str) -> gym.Env:
     ):
         raise ValueError(f"{env_id}: expected a bounded flat Box action space, got {act_space}")
     return env
+
+
+def _validate_env(env_id: str) -> None:
+    """Build ``env_id`` once to check its spaces (:func:`make_env`) before a run is made."""
+    make_env(env_id).close()
 
 
 def default_value_range(env_id: str) -> tuple[float, float]:
@@ -450,7 +456,8 @@ def train(
             obs, _ = env.reset(seed=_stream_seed(seed, TRAIN_RESETS, episode))
             episode_return = 0.0
             stopping = stop_after is not None and steps_this_call >= stop_after
-            if step < total_steps and (step >= next_checkpoint or stopping):
+            due = step >= next_checkpoint or run.checkpoint_due()
+            if step < total_steps and (due or stopping):
                 checkpoint()
                 next_checkpoint = (step // checkpoint_every + 1) * checkpoint_every
             if stopping and step < total_steps:
@@ -487,6 +494,7 @@ register_algorithm(
     doc="DIME (Algorithm 4): diffusion policy, distributional CrossQ critics, autotuned α",
     independent_of=_NOT_SRL,
     train_seeds=_train_seeds,
+    validate_env=_validate_env,
 )
 register_algorithm(
     "dime-gaussian",
@@ -495,6 +503,7 @@ register_algorithm(
     doc="DIME's critic and updates with a tanh-Gaussian policy (Fig. 5.4c-d ablation)",
     independent_of=_NOT_SRL,
     train_seeds=partial(_train_seeds, config_cls=DIMEGaussianConfig),
+    validate_env=_validate_env,
 )
 register_algorithm(
     "crossq",
@@ -503,4 +512,5 @@ register_algorithm(
     doc="CrossQ: tanh-Gaussian policy, BatchRenorm scalar critics, no target network",
     independent_of=_NOT_SRL,
     train_seeds=partial(_train_seeds, config_cls=CrossQConfig),
+    validate_env=_validate_env,
 )

@@ -19,7 +19,9 @@ have no seed axis: their seeds are trained one after the other by the single-see
 
 from __future__ import annotations
 
+import os
 import time
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -28,7 +30,8 @@ from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.registry import config_from_record
-from vslbook.results import DivergenceError, RunDir, restore_rng_state, rng_state
+from vslbook.results import DivergenceError, RunDir
+from vslbook.rng_state import restore_rng_state, rng_state
 from vslbook.seeding import seed_everything
 from vslbook.srl import dime
 from vslbook.srl.cuda_graphs import GraphedUpdates, graphs_wanted
@@ -68,7 +71,11 @@ class _Seed:
         self.last_eval: dict[str, Any] = {}
         self.actions: list[np.ndarray] = []  # this episode's actions so far
         self.episode_return = 0.0
-        state = run.load_checkpoint()
+        self.load(run.load_checkpoint())
+
+    def load(self, state: dict | None) -> None:
+        """Continue from a checkpoint's ``state`` (None: from the start)."""
+        device = self.generator.device
         if state is not None:
             self.agent.load_state_dict(state["agent"])
             if state["replay"] is not None:
@@ -115,7 +122,8 @@ class _Seed:
                 "replay_indices": None if self.indices is None else self.indices.get_state(),
                 "episode_actions": [a.tolist() for a in self.actions],
                 "episode_return": self.episode_return,
-            }
+            },
+            keep_previous=True,  # the seeds write one after another: see _align
         )
 
 
@@ -174,6 +182,7 @@ def train_seeds(
         torch.set_num_threads(cfg.num_threads)
     device = resolve_device(cfg.device)
     seeds = [_Seed(run, rec, cfg, budget, device) for run, rec in zip(runs, records, strict=True)]
+    _align(seeds, lambda i: _Seed(runs[i], records[i], cfg, budget, device))
     groups: dict[int, list[int]] = {}  # checkpoints at different steps: one group per step
     for i, s in enumerate(seeds):
         groups.setdefault(s.step, []).append(i)
@@ -184,6 +193,31 @@ def train_seeds(
         for i, result in zip(members, out, strict=True):
             results[i] = result
     return results
+
+
+def _align(seeds: list[_Seed], fresh: Callable[[int], _Seed]) -> None:
+    """Roll seeds whose checkpoint is ahead of the others back to their previous one.
+
+    A stack writes its seeds' checkpoints one after another, so a crash between two writes
+    leaves some seeds a checkpoint ahead. Trained apart, a seed's numbers would differ in
+    the last bits from those it gets in the stack (other batch shapes), so the run would no
+    longer resume exactly; with the checkpoint each seed kept before its last
+    (``state.pt.prev``), the stack resumes together from the common step. Seeds that were
+    not trained together (no previous checkpoint at that step) keep their own groups. A
+    seed whose first checkpoint is the only one, beside seeds with none, starts afresh
+    (``fresh(i)``, after its checkpoint is set aside and its rows dropped).
+    """
+    lowest = min(s.step for s in seeds)
+    for i, s in enumerate(seeds):
+        if s.step > lowest:
+            previous = s.run.load_checkpoint(previous=True)
+            if previous is not None and previous["step"] == lowest:
+                s.load(previous)
+            elif previous is None and lowest == 0:
+                path = s.run.checkpoint_path
+                os.replace(path, path.with_name(path.name + ".ahead"))
+                s.run.rewind()
+                seeds[i] = fresh(i)
 
 
 def _train_group(

@@ -1,0 +1,84 @@
+"""Stale means other numbers, not other text: replay a run's first rows with today's code.
+
+A run records the fingerprint of the code that made it
+(:func:`vslbook.provenance.code_fingerprint`).
+An edit anywhere the run's code can reach changes that fingerprint, though most edits (a
+docstring, a refactor, a new option) change no number. So a changed fingerprint is a reason
+to check, not a verdict: :func:`replay_matches` trains the same run (algorithm, env, seed,
+budget, configuration) afresh in a temporary folder until it has logged the first
+:data:`REPLAY_ROWS` rows, and compares them with the run's own first rows:
+
+* equal (floats to :data:`RTOL` / :data:`ATOL`, everything else exactly, wall-clock fields
+  aside): the run is current, and today's fingerprint is added to its ``env.json``
+  (``code_hashes_verified``), so the next check is free;
+* different: the run is stale (:func:`vslbook.run_open.open_run` moves it aside).
+
+The replay costs the first few iterations of the run, minutes at most at the thesis's
+sizes, against the hours or days a partial run holds.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tempfile
+from collections.abc import Mapping
+from typing import Any
+
+__all__ = ["ATOL", "REPLAY_ROWS", "RTOL", "WALL_CLOCK", "replay_matches", "rows_match"]
+
+#: rows compared (or fewer, when the run has fewer)
+REPLAY_ROWS = 2
+RTOL, ATOL = 1e-9, 1e-12
+#: metrics that measure the machine, not the run
+WALL_CLOCK = re.compile(r"seconds|_per_s$|^time|fps")
+
+
+def _same(a: Any, b: Any) -> bool:
+    if isinstance(a, float) or isinstance(b, float):
+        if a is None or b is None:
+            return a is b
+        return math.isclose(float(a), float(b), rel_tol=RTOL, abs_tol=ATOL)
+    return a == b
+
+
+def rows_match(old: list[Mapping[str, Any]], new: list[Mapping[str, Any]]) -> str | None:
+    """None when ``new`` equals ``old`` row for row (see the module docstring), else the
+    first difference in words."""
+    if len(new) < len(old):
+        return f"the replay logged {len(new)} rows, the run {len(old)}"
+    for i, (a, b) in enumerate(zip(old, new, strict=False), start=1):
+        keys = {k for k in set(a) | set(b) if not WALL_CLOCK.search(k)}
+        for key in sorted(keys):
+            if not _same(a.get(key), b.get(key)):
+                return f"row {i}, {key}: {a.get(key)!r} recorded, {b.get(key)!r} now"
+    return None
+
+
+def replay_matches(spec: Any, record: Mapping[str, Any], rows: list[Mapping[str, Any]],
+                   budget: Any) -> str | None:  # fmt: skip
+    """Train ``record``'s first :data:`REPLAY_ROWS` rows with today's code and compare them
+    with ``rows`` (the run's own); None when they match, else why not.
+
+    Args:
+        spec: the :class:`vslbook.registry.Algorithm`.
+        record: the run's ``config.json``.
+        rows: the run's logged rows.
+        budget: the run's :class:`vslbook.budget.Budget`.
+    """
+    from vslbook.results import DivergenceError, RunDir
+
+    want = rows[:REPLAY_ROWS]
+    if not want:
+        return None  # nothing logged: nothing to keep or lose
+    with tempfile.TemporaryDirectory(prefix="vslbook-replay-") as tmp:
+        rd = RunDir.create(tmp, dict(record), code_exclude=spec.independent_of)
+        for _ in range(10_000):  # one iteration (or rollout, or episode) per call
+            try:
+                done = spec.train(rd, dict(record), budget, progress=False, stop_after=1)
+            except DivergenceError as err:
+                return f"the replay diverged ({err})"
+            got = rd.metrics()
+            if done is not None or len(got) >= len(want):
+                return rows_match(want, got[: len(want)])
+    return "the replay did not reach the rows to compare"
