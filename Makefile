@@ -67,6 +67,15 @@ $(CHROMIUM):
 
 browser: $(CHROMIUM)
 
+# tests/test_slurm_sweep.py starts a one-node SLURM (munged, slurmctld, slurmd on 127.0.0.1)
+# from Debian's packages; their system services are not used.
+SLURM_PKGS := slurm-wlm munge
+slurm:
+	@command -v slurmctld >/dev/null 2>&1 && command -v munged >/dev/null 2>&1 || { \
+	  command -v apt-get >/dev/null 2>&1 || { echo "no apt-get: install SLURM and MUNGE ($(SLURM_PKGS)) yourself"; exit 0; }; \
+	  $(SUDO) apt-get update -qq && \
+	  DEBIAN_FRONTEND=noninteractive $(SUDO) apt-get install -y -qq $(SLURM_PKGS) >/dev/null; }
+
 gl:
 	@command -v dpkg >/dev/null 2>&1 || { echo "not a Debian system: install Mesa's OSMesa ($(GL_PKGS)) yourself"; exit 0; }; \
 	dpkg -s $(GL_PKGS) >/dev/null 2>&1 || { $(SUDO) apt-get update -qq && \
@@ -92,7 +101,7 @@ book: setup
 site: book
 
 # pytest exits 5 when nothing is collected; that is not a failure of the suite.
-test: notebooks $(MATHJAX) gl browser
+test: notebooks $(MATHJAX) gl browser slurm
 	VSLBOOK_BUDGET=smoke VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
 	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
 	  rc=$$?; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc

@@ -9,7 +9,8 @@ import pytest
 import yaml
 
 from vslbook.cli import main
-from vslbook.sweep import expand_grid, load_slurm_config, sweep
+from vslbook.slurm_jobs import load_slurm_config
+from vslbook.sweep import expand_grid, sweep
 
 ENV = "vslbook/PointReach-v0"
 
@@ -165,3 +166,143 @@ def test_dime_runs_and_sweeps_from_the_command_line(tmp_path, capsys):
     assert len(paths) == 2 and all((p / "DONE").exists() for p in paths)
     steps = sorted(json.loads((p / "config.json").read_text())["n_diffusion_steps"] for p in paths)
     assert steps == [1, 2]
+
+
+# ---------------------------------------------------------------- the SLURM path, no cluster
+# (a real single-node SLURM runs in tests/test_slurm_sweep.py)
+
+
+def test_slurm_config_keys_and_types_are_checked_before_submitting(tmp_path):
+    from vslbook.slurm_jobs import check_slurm_config
+
+    check_slurm_config({"slurm_partition": "gpu", "timeout_min": 60, "mem_gb": 0.5,
+                        "slurm_additional_parameters": {"account": "x"}})  # fmt: skip
+    with pytest.raises(ValueError, match=r"unknown key 'partition' in slurm \(did you mean "
+                       r"'slurm_partition'\?\); expected one of name, timeout_min"):  # fmt: skip
+        check_slurm_config({"partition": "gpu"}, "slurm")
+    with pytest.raises(ValueError, match="timeout_min in slurm must be int, got '60'"):
+        check_slurm_config({"timeout_min": "60"}, "slurm")
+    with pytest.raises(ValueError, match="cpus_per_task in slurm must be int, got True"):
+        check_slurm_config({"cpus_per_task": True}, "slurm")
+    path = tmp_path / "slurm.yaml"
+    path.write_text("slurm_partiton: gpu\n")
+    with pytest.raises(ValueError, match=r"unknown key 'slurm_partiton' in SLURM config '.*"
+                       r"slurm.yaml' \(did you mean 'slurm_partition'\?\)"):  # fmt: skip
+        sweep("erl-pg", [ENV], [0], executor="slurm", slurm=path, root=tmp_path)
+    assert not (tmp_path / "_submitit").exists()
+
+
+def test_cli_slurm_errors_are_one_line(tmp_path, capsys, monkeypatch):
+    path = tmp_path / "slurm.yaml"
+    path.write_text("partition: gpu\n")
+    argv = ["sweep", "erl-pg", "--env", ENV, "--seeds", "0", "--root", str(tmp_path),
+            "--executor", "slurm", "--slurm", str(path)]  # fmt: skip
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vslbook: error: unknown key 'partition'") and err.count("\n") == 1
+    monkeypatch.setenv("PATH", str(tmp_path))  # no sbatch, squeue, sinfo, srun
+    path.write_text("slurm_partition: gpu\n")
+    assert main(argv) == 2
+    assert "executor 'slurm' needs SLURM's commands on PATH" in capsys.readouterr().err
+    assert main([*argv[:-4], "--executor", "debug", "--no-wait"]) == 2
+    assert "--no-wait) needs the local or slurm executor" in capsys.readouterr().err
+
+
+def test_sweep_skips_done_runs(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("VSLBOOK_REUSE_STALE", "1")  # DONE counts even if the code changes
+    first = sweep("erl-pg", [ENV], [0, 1], budget="smoke", root=tmp_path, executor="debug")
+    capsys.readouterr()
+    mtimes = [(p / "DONE").stat().st_mtime_ns for p in first]
+    again = sweep("erl-pg", [ENV], [0, 1], budget="smoke", root=tmp_path, executor="debug")
+    assert again == first
+    assert "2 of 2 runs already DONE; not submitted again" in capsys.readouterr().err
+    assert [(p / "DONE").stat().st_mtime_ns for p in again] == mtimes
+    assert sweep("erl-pg", [ENV], [0, 1], budget="smoke", root=tmp_path, executor="local",
+                 wait=False) == []  # fmt: skip
+
+
+class _FakeJob:
+    def __init__(self, job_id, folder):
+        import submitit
+
+        self.job_id = job_id
+        self.paths = submitit.core.utils.JobPaths(folder, job_id=job_id, task_id=0)
+
+
+def test_waiting_ends_for_jobs_without_a_result(tmp_path, capsys, monkeypatch):
+    """No accounting: a job gone from squeue, a cancelled one, a hopeless pending one and a
+    failed one are each reported in a line; a finished one gives its run directory."""
+    import submitit
+
+    from vslbook import slurm_jobs
+
+    jobs = [_FakeJob(f"7_{i}", tmp_path) for i in range(5)]
+    tmp_path.mkdir(exist_ok=True)
+    submitit.core.utils.cloudpickle_dump(("success", str(tmp_path / "run0")),
+                                         jobs[0].paths.result_pickle)  # fmt: skip
+    submitit.core.utils.cloudpickle_dump(("error", "Traceback ...\nValueError: boom"),
+                                         jobs[4].paths.result_pickle)  # fmt: skip
+    queue = {"7_2": ("CANCELLED", "None"), "7_3": ("PENDING", "PartitionConfig")}
+    cancelled = []
+    monkeypatch.setattr(slurm_jobs, "_squeue", lambda ids: {j: queue[j] for j in ids if j in queue})
+    monkeypatch.setattr(slurm_jobs, "_sacct", lambda ids: {})
+    monkeypatch.setattr(slurm_jobs, "_slurm_command", lambda argv, **kw: cancelled.append(argv))
+    monkeypatch.setattr(slurm_jobs, "RESULT_GRACE_S", 0.0)
+    monkeypatch.setattr(slurm_jobs.time, "sleep", lambda s: None)
+    got = slurm_jobs.wait_for_jobs(jobs, [f"r{i}" for i in range(5)])
+    assert got[0] == tmp_path / "run0"
+    assert got[1].startswith("job 7_1 (run r1) left the queue (state unknown) without a result")
+    assert got[2].startswith("job 7_2 (run r2) ended CANCELLED without a result; log: ")
+    assert got[3].startswith("job 7_3 (run r3) cannot start: PartitionConfig, the request")
+    assert got[4].startswith("job 7_4 (run r4) failed: ValueError: boom; log: ")
+    assert cancelled == [["scancel", "7_3"]]
+    assert "job 7_2 CANCELLED: r2" in capsys.readouterr().err
+
+
+def test_cli_reports_jobs_without_a_result(tmp_path, capsys, monkeypatch):
+    from vslbook import sweep as sweep_mod
+
+    def fails(*args, **kwargs):
+        raise sweep_mod.SweepError(["job 7_1 (run r1) ended CANCELLED without a result"],
+                                   [tmp_path / "r0"])  # fmt: skip
+
+    monkeypatch.setattr(sweep_mod, "sweep", fails)
+    assert main(["sweep", "erl-pg", "--env", ENV, "--root", str(tmp_path)]) == 1
+    out, err = capsys.readouterr()
+    assert out.split() == [str(tmp_path / "r0")]
+    assert err == "vslbook: error: job 7_1 (run r1) ended CANCELLED without a result\n"
+
+
+@pytest.mark.slow
+def test_overlapping_sweeps_end_with_one_clean_run_each(tmp_path):
+    """Two sweeps that share seed 1 run at once: the run they share is trained once (the
+    second job waits on its lock, then reuses it), and no run directory repeats a row."""
+    import os
+
+    import pandas as pd
+
+    from vslbook.data import collect_runs
+    from vslbook.results import RunDir
+
+    root = tmp_path / "runs"
+    base = [sys.executable, "-m", "vslbook.cli", "sweep", "erl-pg", "--env",
+            "vslbook/PointReach-v0", "--budget", "smoke", "--executor", "local",
+            "--root", str(root), "--seeds"]  # fmt: skip
+    env = dict(os.environ, OMP_NUM_THREADS="1", VSLBOOK_REUSE_STALE="1")
+    procs = [subprocess.Popen([*base, *seeds], env=env, stdout=subprocess.PIPE,
+                              stderr=subprocess.PIPE, text=True)
+             for seeds in (["0", "1"], ["1", "2"])]  # fmt: skip
+    outs = [p.communicate(timeout=600) for p in procs]
+    assert [p.returncode for p in procs] == [0, 0], [o[1][-2000:] for o in outs]
+    dirs = sorted(p for p in root.iterdir() if (p / "config.json").is_file())
+    assert len(dirs) == 3
+    for path in dirs:
+        rd = RunDir.open(path)
+        assert rd.done
+        rd.check_done()
+        steps = [r["step"] for r in rd.metrics()]
+        assert steps == sorted(set(steps))
+    written = collect_runs(dirs, tmp_path / "data")
+    runs = pd.read_csv(written["runs.csv"])
+    evals = pd.read_csv(written["evals.csv.gz"])
+    assert len(runs) == 3 and not evals.duplicated(["run", "step", "metric"]).any()

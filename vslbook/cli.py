@@ -4,10 +4,14 @@
     vslbook algorithms                      registered algorithms and their envs
     vslbook figures                         registered figures
     vslbook run ALGO --env ENV --seed S --budget B [--set key=value ...] [--root runs]
+                [--dry-run] [--wait] [--restart]
     vslbook run ALGO --env ENV --seeds 0 1 2 ...   several seeds in one process
     vslbook sweep ALGO --env ENV [--env ENV2] --seeds 0 1 2 [--grid key=v1,v2] \
-                  [--executor debug|local|slurm] [--slurm slurm.yaml]
+                  [--executor debug|local|slurm] [--slurm slurm.yaml] [--no-wait]
     vslbook figure ID [--budget B] [--out DIR]
+    vslbook plan FIGURE [--budget B] [--root DIR]   what a figure's runs need, core-hours left
+    vslbook record FIGURE [--budget B] [--root DIR] a figure's finished runs into data/results/
+    vslbook results [--json]                 recorded run sets: final IQM, 95 % CI, stale
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from vslbook.budget import BUDGETS, get_budget
-from vslbook.registry import ALGORITHMS, FIGURES, get_figure, load_plugins
+from vslbook.registry import ALGORITHMS, FIGURES, check_seed, get_figure, load_plugins
 
 
 def _pairs(items: Sequence[str] | None, *, lists: bool) -> dict:
@@ -33,14 +37,13 @@ def _pairs(items: Sequence[str] | None, *, lists: bool) -> dict:
 
 
 def _seed(text: str) -> int:
-    """argparse type of a seed: an integer >= 0, with a clear message otherwise."""
+    """argparse type of a seed: an integer in ``[0, 2**32)``, with a clear message otherwise."""
     try:
-        seed = int(text)
+        return check_seed(int(text))
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}") from None
-    if seed < 0:
-        raise argparse.ArgumentTypeError(f"expected an integer >= 0, got {text!r}")
-    return seed
+        raise argparse.ArgumentTypeError(
+            f"expected an integer with 0 <= seed < 2**32, got {text!r}"
+        ) from None
 
 
 def _algorithm_list() -> str:
@@ -108,6 +111,19 @@ def _parser() -> argparse.ArgumentParser:
         action="store_true",
         help="reuse or resume a run directory made by other code (prints a warning)",
     )
+    r.add_argument(
+        "--dry-run", action="store_true",
+        help="print the name of the run directory it would train; create nothing",
+    )  # fmt: skip
+    r.add_argument(
+        "--wait", action="store_true",
+        help="if another process trains the run, wait for it instead of stopping",
+    )  # fmt: skip
+    r.add_argument(
+        "--restart", action="store_true",
+        help="move the existing run directory to ROOT/_restarted/ and train afresh "
+        "(a corrupt checkpoint, a DONE its metrics do not back)",
+    )  # fmt: skip
 
     s = sub.add_parser(
         "sweep", help="train a grid of configs and seeds via submitit", **algo_help
@@ -123,6 +139,40 @@ def _parser() -> argparse.ArgumentParser:
     )
     s.add_argument("--executor", default="local", choices=["debug", "local", "slurm"])
     s.add_argument("--slurm", default=None, help="YAML file of submitit SLURM parameters")
+    s.add_argument(
+        "--no-wait", action="store_true",
+        help="submit and return, printing the job ids (local and slurm executors); the same "
+        "sweep run again later waits for them",
+    )  # fmt: skip
+
+    pl = sub.add_parser(
+        "plan", help="the state of every run a figure needs and the core-hours left",
+        description="One line per run the figure draws: '<state> <run directory name>', "
+        "state done, partial (with progress), missing, stale (made by other code), failed "
+        "or recorded; then the core-hours still to train, from the per-iteration times the "
+        "runs in ROOT measured.",
+    )  # fmt: skip
+    pl.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
+    pl.add_argument("--budget", default=None)
+    pl.add_argument("--root", default="runs", help="folder of run directories")
+
+    rec = sub.add_parser(
+        "record", help="export a figure's finished runs into data/results/FIGURE/BUDGET/",
+        description="Write runs.csv, evals.csv.gz, provenance.json and registry.json for the "
+        "runs of FIGURE at BUDGET that are DONE, intact and made by the current code; runs "
+        "recorded earlier are kept (ROOT's copy wins). Lists the runs not recorded.",
+    )  # fmt: skip
+    rec.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
+    rec.add_argument("--budget", default=None)
+    rec.add_argument("--root", default="runs", help="folder of run directories")
+
+    res = sub.add_parser(
+        "results", help="the recorded run sets: final IQM with a 95 %% CI per method",
+        description="One line per recorded (figure, method, budget): seeds, the figure's "
+        "metric, the IQM of each run's final evaluation with a 95 % stratified-bootstrap CI, "
+        "and whether the code the runs can reach has changed since (stale).",
+    )  # fmt: skip
+    res.add_argument("--json", action="store_true", help="one JSON object per line")
 
     f = sub.add_parser("figure", help="reproduce a registered figure")
     f.add_argument("id")
@@ -134,12 +184,26 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; bad input, a locked run, a damaged run directory and file
+    system errors end in one line ``vslbook: error: ...`` and exit status 2."""
+    from vslbook.run_lock import RunLockedError
+
     args = _parser().parse_args(argv)
     try:
         return _dispatch(args)
-    except ValueError as err:
-        print(f"vslbook: error: {err}", file=sys.stderr)
+    except (ValueError, RunLockedError) as err:
+        print(f"vslbook: error: {_one_line(err)}", file=sys.stderr)
         return 2
+    except OSError as err:
+        where = f" ({err.filename})" if getattr(err, "filename", None) else ""
+        what = err.strerror or str(err)
+        print(f"vslbook: error: {what}{where}", file=sys.stderr)
+        return 2
+
+
+def _one_line(err: BaseException) -> str:
+    """The message of ``err``; a multi-line one (a config diff) keeps its lines joined."""
+    return "; ".join(line.strip() for line in str(err).splitlines() if line.strip())
 
 
 def _dispatch(args: argparse.Namespace) -> int:
@@ -157,13 +221,21 @@ def _dispatch(args: argparse.Namespace) -> int:
             extra = f"  [{', '.join(item.envs)}]" if getattr(item, "envs", ()) else ""
             print(f"{name:24s} {item.doc}{extra}")
         return 0
+    if args.command == "run" and args.dry_run:
+        from vslbook.training import run_name
+
+        for seed in args.seeds if args.seeds is not None else [args.seed or 0]:
+            print(run_name(args.algo, args.env, seed, args.budget,
+                           overrides=_pairs(args.set, lists=False)))  # fmt: skip
+        return 0
     if args.command == "run" and args.seeds is not None:
         from vslbook.training import run_seeds
 
         rds = run_seeds(
             args.algo, args.env, args.seeds, args.budget, root=args.root,
             overrides=_pairs(args.set, lists=False), progress=not args.no_progress,
-            reuse_stale=True if args.reuse_stale else None,
+            reuse_stale=True if args.reuse_stale else None, wait=args.wait,
+            restart=args.restart,
         )  # fmt: skip
         for rd in rds:
             print(rd.path, rd.status)
@@ -180,6 +252,8 @@ def _dispatch(args: argparse.Namespace) -> int:
             overrides=_pairs(args.set, lists=False),
             progress=not args.no_progress,
             reuse_stale=True if args.reuse_stale else None,
+            wait=args.wait,
+            restart=args.restart,
         )
         print(rd.path)
         if rd.failed:
@@ -189,20 +263,53 @@ def _dispatch(args: argparse.Namespace) -> int:
             print(json.dumps(json.loads((rd.path / "DONE").read_text() or "{}"), indent=1))
         return 0
     if args.command == "sweep":
-        from vslbook.sweep import sweep
+        from vslbook.sweep import SweepError, sweep
 
-        paths = sweep(
-            args.algo,
-            args.env,
-            args.seeds,
-            grid=_pairs(args.grid, lists=True),
-            budget=args.budget,
-            root=args.root,
-            executor=args.executor,
-            slurm=args.slurm,
-        )
+        try:
+            paths = sweep(
+                args.algo,
+                args.env,
+                args.seeds,
+                grid=_pairs(args.grid, lists=True),
+                budget=args.budget,
+                root=args.root,
+                executor=args.executor,
+                slurm=args.slurm,
+                wait=not args.no_wait,
+            )
+        except SweepError as err:  # jobs ended without a result: the finished runs, then why
+            for p in err.paths:
+                print(p)
+            for line in err.problems:
+                print(f"vslbook: error: {line}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt:  # the sweep said what stays queued and how to cancel it
+            return 130
         for p in paths:
-            print(p)
+            print(p.job_id if args.no_wait else p)
+        return 0
+    if args.command == "plan":
+        from vslbook.experiments.record import recorded_names
+        from vslbook.experiments.run_plan import plan, plan_text
+
+        names = recorded_names(args.figure, args.budget)
+        rows = plan(args.figure, args.budget, args.root, recorded=lambda r: r.name in names)
+        print(plan_text(rows))
+        return 0
+    if args.command == "record":
+        from vslbook.experiments.record import record, record_text
+
+        print(record_text(record(args.figure, args.budget, args.root)))
+        return 0
+    if args.command == "results":
+        from vslbook.experiments.record import result_rows, results_text
+
+        rows = result_rows()
+        if args.json:
+            for row in rows:
+                print(json.dumps(row))
+        else:
+            print(results_text(rows))
         return 0
     if args.command == "figure":
         fig = get_figure(args.id)
