@@ -144,12 +144,14 @@ def test_ppo_ch4_from_the_command_line(tmp_path, monkeypatch):
     with pytest.raises(ValueError, match="not on 'hopper-jump'"):
         D.ppo_steps("hopper-jump", "reduced")
     monkeypatch.setenv("VSLBOOK_WORKERS", "1")
-    path = D.ppo_run("reacher5", 0, "smoke", tmp_path)
+    ppo = next(r for r in D.figure_runs("fig4-3c", "smoke") if r.method == "ppo")
+    assert (ppo.algo, ppo.env, ppo.length, ppo.unit) == (
+        "ppo-ch4", "vslbook/Reacher5SparseStep-v0", 16384, "env_steps")  # fmt: skip
+    path = ppo.train(tmp_path)
     rows = RunDir.open(path).metrics()
     assert rows[-1]["samples"] == rows[-1]["episodes"] > 0 and rows[-1]["env_steps"] == 16384
-    assert D.ppo_run("reacher5", 0, "smoke", tmp_path) == path  # finished: reused
-    with pytest.raises(ValueError, match="not on 'mini-golf'"):
-        D.ppo_run("mini-golf", 0, "smoke", tmp_path)
+    assert ppo.train(tmp_path) == path  # finished: reused
+    assert not any(r.method == "ppo" for r in D.figure_runs("fig4-4d", "reduced"))
 
 
 def test_skills_at_a_context(reacher_runs):

@@ -21,12 +21,16 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from vslbook.results import RunDir, _atomic_write, _json_bytes, config_hash
+from vslbook.jsonfiles import atomic_write, config_hash, json_bytes
+from vslbook.results import RunDir
 
 __all__ = [
     "DataIntegrityError",
     "collect_runs",
+    "csv_bytes",
     "data_dir",
+    "evals_frame",
+    "gzip_bytes",
     "load_table",
     "paper_curves",
     "paper_tasks",
@@ -105,7 +109,7 @@ def register_file(path: str | os.PathLike[str], description: str) -> dict[str, A
     entry = {"sha256": _sha256(data), "rows": _count_rows(path, data), "description": description}
     registry = _read_registry(path.parent)
     registry[path.name] = entry
-    _atomic_write(path.parent / REGISTRY, _json_bytes(registry))
+    atomic_write(path.parent / REGISTRY, json_bytes(registry))
     return entry
 
 
@@ -175,16 +179,31 @@ def _is_numeric(value: Any) -> bool:
     return value is None or (isinstance(value, (int, float)) and not isinstance(value, bool))
 
 
-def _csv_bytes(frame: pd.DataFrame) -> bytes:
+def csv_bytes(frame: pd.DataFrame) -> bytes:
+    """``frame`` as CSV bytes without its index, ``\\n`` line ends: the tables' format."""
     return frame.to_csv(index=False, lineterminator="\n").encode("utf-8")
 
 
-def _gzip_bytes(data: bytes) -> bytes:
+def gzip_bytes(data: bytes) -> bytes:
     """gzip with a fixed header (no file name, mtime 0): same input, same bytes."""
     buffer = io.BytesIO()
     with gzip.GzipFile(filename="", mode="wb", fileobj=buffer, mtime=0, compresslevel=9) as gz:
         gz.write(data)
     return buffer.getvalue()
+
+
+def evals_frame(runs: Iterable[RunDir]) -> pd.DataFrame:
+    """The long-format evaluations of ``runs`` (columns run, step, metric, value), in the
+    order given: one row per (run, step, numeric metric) of each ``metrics.jsonl``, metrics
+    sorted by name within a row, ``null`` values as NaN."""
+    rows = []
+    for run in runs:
+        for row in run.metrics():
+            for metric in sorted(k for k in row if k != "step"):
+                if _is_numeric(row[metric]):
+                    value = np.nan if row[metric] is None else row[metric]
+                    rows.append((run.name, row["step"], metric, value))
+    return pd.DataFrame(rows, columns=EVALS_COLUMNS).astype({"value": "float64"})
 
 
 def collect_runs(
@@ -210,7 +229,7 @@ def collect_runs(
                 f"{by_name[run.name].path} and {run.path}"
             )
         by_name[run.name] = run
-    run_rows, eval_rows = [], []
+    run_rows = []
     for name in sorted(by_name):
         run = by_name[name]
         config = run.config
@@ -225,19 +244,14 @@ def collect_runs(
                 "status": run.status,
             }
         )
-        for row in run.metrics():
-            for metric in sorted(k for k in row if k != "step"):
-                if _is_numeric(row[metric]):
-                    value = np.nan if row[metric] is None else row[metric]
-                    eval_rows.append((name, row["step"], metric, value))
     runs_frame = pd.DataFrame(run_rows, columns=RUNS_COLUMNS)
     runs_frame["seed"] = runs_frame["seed"].astype("Int64")
-    evals_frame = pd.DataFrame(eval_rows, columns=EVALS_COLUMNS).astype({"value": "float64"})
+    evals = evals_frame(by_name[name] for name in sorted(by_name))
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     written = {"runs.csv": out / "runs.csv", "evals.csv.gz": out / "evals.csv.gz"}
-    _atomic_write(written["runs.csv"], _csv_bytes(runs_frame))
-    _atomic_write(written["evals.csv.gz"], _gzip_bytes(_csv_bytes(evals_frame)))
+    atomic_write(written["runs.csv"], csv_bytes(runs_frame))
+    atomic_write(written["evals.csv.gz"], gzip_bytes(csv_bytes(evals)))
     register_file(
         written["runs.csv"],
         "one row per run: run, algo, env, seed, budget, "

@@ -12,9 +12,11 @@ deep Gaussian with the same trust-region projection) and ``diskill-v2`` / ``disk
 step-based PPO of Tables B.3 and B.6 on the 5-link reacher and box pushing (Figs. 4.3c,
 4.4b), as long as Di-SkilL's run at the same budget in episodes
 (:func:`vslbook.experiments.diskill_runs.ppo_steps`). A Di-SkilL run's configuration is
-:func:`vslbook.erl.diskill_config.diskill_config` of the env's task with the budget's share
-of the iterations (:func:`iterations`); like Chapter 3's, these configs hold the counts
-themselves, so ``--set iterations=10`` means ten iterations at any budget.
+:func:`vslbook.erl.diskill_config.diskill_config` of the env's task with the counts its
+figure uses at the budget (:func:`vslbook.experiments.diskill_runs.counts`), so ``vslbook
+run`` trains exactly the run the figure draws, in the same run directory; like Chapter 3's,
+these configs hold the counts themselves, so ``--set iterations=10`` means ten iterations at
+any budget.
 """
 
 from __future__ import annotations
@@ -27,7 +29,7 @@ from vslbook.erl.ppo_ch4 import PPOCh4Config
 from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir
 
-__all__ = ["DISKILL_ENVS", "PPO_ENVS", "DiSkillRun", "PPOCh4Run", "iterations", "task_of"]
+__all__ = ["DISKILL_ENVS", "PPO_ENVS", "DiSkillRun", "PPOCh4Run", "task_of"]
 
 #: one-step env id → task name, for every Chapter 4 task with a Di-SkilL preset.
 DISKILL_ENVS = {
@@ -67,16 +69,13 @@ def task_of(env: str, table: dict[str, str]) -> str:
     return table[env]
 
 
-def iterations(task: str, method: str, budget: Budget) -> int:
-    """The budget's share of the thesis's iterations (at least 2)."""
-    return budget.scale(diskill_config(task, method).iterations, minimum=2)
-
-
 def _defaults(method: str, envs: dict[str, str]):
     def defaults(env: str, budget: Budget, overrides: dict) -> DiSkillRun:
+        from vslbook.experiments.diskill_runs import counts
+
         task = task_of(env, envs)
-        cfg = diskill_config(task, method, iterations=iterations(task, method, budget))
-        return DiSkillRun(**asdict(cfg))
+        c = {k: v for k, v in counts(task, method, budget).items() if k != "seeds"}
+        return DiSkillRun(**asdict(diskill_config(task, method, **c)))
 
     defaults.__doc__ = f"{method}'s configuration of ``env`` at ``budget`` (Tables B.2-B.7)."
     return defaults
@@ -113,6 +112,7 @@ def _train(method: str, envs: dict[str, str]):
                 train_loop(
                     task, config, seed, state=s, until=until, callback=log,
                     checkpoint=lambda st: rd.save_checkpoint({"diskill": st.state_dict()}),
+                    checkpoint_due=rd.checkpoint_due,
                 )  # fmt: skip
         finally:
             task.close()

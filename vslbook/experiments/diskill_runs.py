@@ -4,8 +4,9 @@ Each figure of Chapter 4 compares methods on one task (:data:`FIGURES`). :func:`
 gives what a budget changes (seeds, iterations, evaluation points; at ``smoke`` also the
 experts and samples per expert, a "does it run" setting); every other number is the
 thesis's (:func:`vslbook.erl.diskill_config.diskill_config`, Tables B.2-B.7).
-:func:`run_set` trains the runs through :func:`vslbook.training.run` (the directories
-``vslbook run`` makes, resumable, reused when finished) and :func:`curves` turns their test
+:func:`figure_runs` declares each figure's runs at a budget (the ones ``vslbook run``
+and ``vslbook plan`` name); :func:`run_set` trains them through
+:func:`vslbook.training.run` (resumable, reused when finished) and :func:`curves` turns their test
 rows into IQM curves with 95 % stratified-bootstrap intervals over seeds.
 """
 
@@ -23,7 +24,8 @@ from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
 
 __all__ = [
     "FIGURES", "LABELS", "METRIC", "PPO_TASKS", "REDUCED", "THESIS_AHEAD", "THESIS_OUTCOME",
-    "counts", "curves", "env_id", "final_scores", "load_model", "ppo_run", "ppo_steps", "run_set",
+    "counts", "curves", "env_id", "figure_runs", "final_scores", "load_model", "ppo_steps",
+    "run_set",
 ]  # fmt: skip
 
 #: figure → (task, methods) as in the thesis (PPO runs separately, step-based).
@@ -129,6 +131,34 @@ def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[s
     return out
 
 
+def figure_runs(figure: str, budget: Budget | str | None = None) -> list[Any]:
+    """The runs Fig. ``figure`` (``fig4-3b`` ... ``fig4-4d``, or ``4.3b`` ...) draws at
+    ``budget``, as :class:`vslbook.experiments.run_plan.FigureRun` values: each method of
+    :data:`FIGURES` with :func:`counts`'s seeds, and PPO where the thesis runs it (on box
+    pushing only above ``smoke``: one rollout takes about 15 s there). They carry no
+    overrides: ``vslbook run METHOD --env ENV --seed S --budget B`` trains the same runs."""
+    from vslbook.experiments.ch4_algorithms import PPO_ENVS
+    from vslbook.experiments.run_plan import FigureRun
+
+    key = figure.removeprefix("fig").replace("-", ".")
+    if key not in FIGURES:
+        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(FIGURES)}")
+    b = get_budget(budget)
+    fig_id = "fig" + key.replace(".", "-")
+    task, methods = FIGURES[key]
+    runs = []
+    for method in methods:
+        c = counts(task, method, b)
+        runs += [FigureRun(fig_id, method, method, env_id(task), seed, b.name, c["iterations"])
+                 for seed in range(c["seeds"])]  # fmt: skip
+    if task == "reacher5" or (task in PPO_TASKS and b.name != "smoke"):
+        env = next(e for e, t in PPO_ENVS.items() if t == task)
+        runs += [FigureRun(fig_id, "ppo", "ppo-ch4", env, seed, b.name, ppo_steps(task, b),
+                           unit="env_steps")
+                 for seed in range(counts(task, "diskill", b)["seeds"])]  # fmt: skip
+    return runs
+
+
 def run_set(
     figure: str,
     budget: Budget | str | None = None,
@@ -137,27 +167,17 @@ def run_set(
     methods: tuple[str, ...] | None = None,
     progress: bool = False,
 ) -> dict[str, list[Path]]:
-    """Train (or reuse) every run of ``figure`` at ``budget``: method → run directories."""
-    from vslbook.training import run
-
-    if figure not in FIGURES:
-        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(FIGURES)}")
-    task, figure_methods = FIGURES[figure]
-    b = get_budget(budget)
+    """Train (or reuse) every run of ``figure`` at ``budget`` (:func:`figure_runs`):
+    method → run directories; ``methods`` picks some of them."""
+    runs = figure_runs(figure, budget)
+    known = tuple(dict.fromkeys(r.method for r in runs))
+    for method in methods or ():
+        if method not in known:
+            raise ValueError(f"figure {figure} has no method {method!r}; expected {known}")
     out: dict[str, list[Path]] = {}
-    for method in methods or figure_methods:
-        if method not in figure_methods:
-            raise ValueError(f"figure {figure} has no method {method!r}; expected {figure_methods}")
-        c = counts(task, method, b)
-        overrides = {k: v for k, v in c.items() if k != "seeds"}
-        dirs = []
-        for seed in range(c["seeds"]):
-            rd = run(method, env_id(task), seed, b, root=root, overrides=overrides,
-                     progress=progress)  # fmt: skip
-            if rd.failed:
-                raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
-            dirs.append(rd.path)
-        out[method] = dirs
+    for r in runs:
+        if methods is None or r.method in methods:
+            out.setdefault(r.method, []).append(r.train(root, progress=progress))
     return out
 
 
@@ -189,24 +209,6 @@ def ppo_steps(task: str, budget: Budget | str | None = None) -> int:
     steps = min(cfg.iterations * cfg.episodes_per_iteration * horizon,
                 round(b.fraction * matched_total_steps(task)))  # fmt: skip
     return -(-steps // N_ROLLOUT_STEPS) * N_ROLLOUT_STEPS
-
-
-def ppo_run(
-    task: str, seed: int, budget: Budget | str | None = None, root: str | Path = "runs",
-    *, progress: bool = False,
-) -> Path:  # fmt: skip
-    """Train (or reuse) PPO (Table B.3 / B.6) on the step-based ``task``: the run directory
-    ``vslbook run ppo-ch4`` makes (:mod:`vslbook.experiments.ch4_algorithms`)."""
-    from vslbook.experiments.ch4_algorithms import PPO_ENVS
-    from vslbook.training import run
-
-    if task not in PPO_TASKS:
-        raise ValueError(f"the thesis runs PPO on {PPO_TASKS}, not on {task!r}")
-    env = next(e for e, t in PPO_ENVS.items() if t == task)
-    rd = run("ppo-ch4", env, seed, budget, root=root, progress=progress)
-    if rd.failed:
-        raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
-    return rd.path
 
 
 def curves(

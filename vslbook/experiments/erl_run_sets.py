@@ -58,14 +58,7 @@ def _figure(figure: str) -> RunSet:
     def train(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]:
         from vslbook.experiments import diskill_runs as DR
 
-        runs = DR.run_set(figure, budget, root, progress=progress)
-        task = DR.FIGURES[figure][0]
-        # box pushing at smoke: no PPO (one rollout of 16384 steps takes ~15 s)
-        if task == "reacher5" or (task in DR.PPO_TASKS and budget.name != "smoke"):
-            seeds = DR.counts(task, "diskill", budget)["seeds"]
-            runs["ppo"] = [DR.ppo_run(task, s, budget, root, progress=progress)
-                           for s in range(seeds)]  # fmt: skip
-        return runs
+        return DR.run_set(figure, budget, root, progress=progress)
 
     return train
 

@@ -1,0 +1,55 @@
+"""Each figure's runs are declared once: ``vslbook run --dry-run`` names the runs ``vslbook
+plan`` lists, for every registered figure and budget, and ``plan`` reads a root's state."""
+
+from __future__ import annotations
+
+import pytest
+
+from vslbook.cli import main
+from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs, plan, plan_text
+
+
+@pytest.mark.parametrize("budget", ["smoke", "reduced", "full"])
+@pytest.mark.parametrize("figure", sorted(FIGURE_MODULES))
+def test_dry_runs_name_the_runs_plan_lists(figure, budget, capsys, tmp_path):
+    runs = figure_runs(figure, budget)
+    assert runs and len({r.name for r in runs}) == len(runs)  # no run listed twice
+    capsys.readouterr()
+    assert main(["plan", figure, "--budget", budget, "--root", str(tmp_path)]) == 0
+    listed = [line.split()[1] for line in capsys.readouterr().out.splitlines()[:-1]]
+    dry = []
+    for r in runs:
+        argv = ["run", r.algo, "--env", r.env, "--seed", str(r.seed), "--budget", budget,
+                "--dry-run", "--root", str(tmp_path)]  # fmt: skip
+        argv += [f"--set={k}={v}" for k, v in r.overrides.items()]
+        assert main(argv) == 0
+        dry.append(capsys.readouterr().out.strip())
+    assert dry == listed == [r.name for r in runs]
+    assert not any(tmp_path.iterdir())  # neither wrote anything
+
+
+def test_the_command_line_trains_the_run_the_figure_draws():
+    # Fig. 4.3c at reduced: 300 iterations of 10 experts, as the notebook's panel
+    from vslbook.budget import get_budget
+    from vslbook.registry import get_algorithm
+
+    run = next(r for r in figure_runs("fig4-3c", "reduced") if r.method == "diskill")
+    config = get_algorithm("diskill").default_config(run.env, get_budget("reduced"), {})
+    assert (run.length, config.iterations, config.n_experts) == (300, 300, 10)
+    assert len([r for r in figure_runs("fig4-3c", "full") if r.method == "diskill"]) == 24
+
+
+def test_plan_reads_the_state_of_each_run(tmp_path, monkeypatch):
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    runs = figure_runs("fig4-4a", "smoke")
+    first = runs[0]
+    first.train(tmp_path)
+    rows = plan("fig4-4a", "smoke", tmp_path)
+    assert [r.state for r in rows] == ["done"] + ["missing"] * (len(runs) - 1)
+    assert rows[0].progress == first.length and rows[0].seconds_per_unit > 0
+    text = plan_text(rows)
+    assert text.splitlines()[0] == f"done     {first.name}"
+    assert text.splitlines()[-1].endswith("not yet timed (train one of each method to estimate "
+                                          "them)")  # fmt: skip
+    with pytest.raises(ValueError, match="figure 'fig9-9' declares no runs; expected one of"):
+        figure_runs("fig9-9")

@@ -1,0 +1,398 @@
+"""Recorded results: a figure's finished runs as registered tables in ``data/results/``.
+
+``vslbook record FIGURE --budget B --root DIR`` (:func:`record`) exports the runs of
+``FIGURE`` at ``B`` (:func:`vslbook.experiments.run_plan.figure_runs`) that are finished in
+``DIR`` into ``data/results/<figure>/<budget>/``:
+
+``runs.csv``
+    one row per run: run, figure, method, algo, env, seed, budget, config_hash, status;
+``evals.csv.gz``
+    every numeric row of each ``metrics.jsonl`` in long format: run, step, metric, value;
+``provenance.json``
+    per run its config, seed, budget, code fingerprint (and the paths it left out), git
+    sha and dirty flag, package versions, host, python and platform, start time, wall time
+    and the date it was recorded;
+``registry.json``
+    the sha256 and row count of the three files (:func:`vslbook.data.register_file`), so
+    a damaged or hand-edited table is an error, never a silently wrong plot.
+
+Only runs that are ``DONE``, whose metrics match what ``DONE`` recorded
+(:meth:`~vslbook.results.RunDir.check_done`) and that the current code made
+(:attr:`~vslbook.results.RunDir.code_matches`) are recorded. A set grows across machines
+and sessions: recording again merges with what the folder holds (the root's copy of a run
+wins) and rewrites the tables deterministically; recording the same runs twice gives the
+same bytes.
+
+Reading: :func:`load_recorded` gives a figure's per-run metric frames, :func:`recorded_names`
+the names in a set (``vslbook plan`` marks them ``recorded``), and :func:`result_rows`
+(``vslbook results``) the final IQM of every recorded (figure, method, budget) with a 95 %
+stratified-bootstrap CI over seeds and whether the code that made the runs has changed.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from vslbook.budget import BUDGETS, Budget, get_budget
+from vslbook.data import (
+    csv_bytes,
+    evals_frame,
+    gzip_bytes,
+    register_file,
+    results_dir,
+    verify_file,
+)
+from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs
+from vslbook.jsonfiles import atomic_write, json_bytes
+from vslbook.provenance import code_fingerprint
+from vslbook.results import RunDir, RunDirError
+
+__all__ = [
+    "RUNS_COLUMNS", "RecordReport", "figure_info", "load_recorded", "record", "record_text",
+    "recorded_dir", "recorded_names", "result_rows", "results_text",
+]  # fmt: skip
+
+#: columns of a recorded set's ``runs.csv``
+RUNS_COLUMNS = ["run", "figure", "method", "algo", "env", "seed", "budget", "config_hash",
+                "status"]  # fmt: skip
+PROVENANCE = "provenance.json"
+#: most bootstrap resamples :func:`result_rows` draws (``full`` asks for 50 000)
+MAX_REPS = 2000
+_DESCRIPTIONS = {
+    "runs.csv": "one row per recorded run: run, figure, method, algo, env, seed, budget, "
+    "config_hash, status; written by vslbook record",
+    "evals.csv.gz": "long-format evaluations: run, step, metric, value; every numeric row of "
+    "each run's metrics.jsonl; written by vslbook record",
+    PROVENANCE: "per run: config, seed, budget, code fingerprint, git sha and dirty flag, "
+    "package versions, host, python, platform, start and wall time, date recorded; "
+    "written by vslbook record",
+}
+
+
+# --------------------------------------------------------------------------- locations
+
+
+def _check_figure(figure: str) -> str:
+    if figure not in FIGURE_MODULES:
+        raise ValueError(
+            f"figure {figure!r} declares no runs; expected one of {', '.join(FIGURE_MODULES)}"
+        )
+    return figure
+
+
+def recorded_dir(figure: str, budget: Budget | str | None = None) -> Path:
+    """``data/results/<figure>/<budget>/`` (under :func:`vslbook.data.results_dir`)."""
+    return results_dir() / _check_figure(figure) / get_budget(budget).name
+
+
+def figure_info(figure: str) -> tuple[str, str]:
+    """(task, plotted metric) of ``figure``, from its chapter module's ``FIGURES`` and
+    ``METRIC`` (keyed ``4.3c`` for ``fig4-3c``)."""
+    module = importlib.import_module(FIGURE_MODULES[_check_figure(figure)])
+    key = figure.removeprefix("fig").replace("-", ".")
+    return module.FIGURES[key][0], module.METRIC[key]
+
+
+# --------------------------------------------------------------------------- reading a set
+
+
+def _read_csv(directory: Path, name: str, dtype: dict[str, Any]) -> pd.DataFrame:
+    """A registered table of ``directory``, verified, floats read back exactly."""
+    path = directory / name
+    verify_file(path)
+    return pd.read_csv(path, dtype=dtype, float_precision="round_trip", keep_default_na=False,
+                       na_values=[""])  # fmt: skip
+
+
+def _read_set(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
+    """(runs, evals, provenance) of a recorded set; empty ones where nothing is recorded."""
+    if not (directory / "runs.csv").exists():
+        empty_runs = pd.DataFrame(columns=RUNS_COLUMNS)
+        empty_evals = pd.DataFrame(columns=["run", "step", "metric", "value"])
+        return empty_runs, empty_evals, {}
+    runs = _read_csv(directory, "runs.csv", {c: str for c in RUNS_COLUMNS if c != "seed"})
+    runs["seed"] = runs["seed"].astype("int64")
+    evals = _read_csv(directory, "evals.csv.gz",
+                      {"run": str, "step": "int64", "metric": str, "value": "float64"})  # fmt: skip
+    verify_file(directory / PROVENANCE)
+    provenance = json.loads((directory / PROVENANCE).read_text(encoding="utf-8"))
+    return runs, evals, provenance.get("runs", {})
+
+
+def recorded_names(figure: str, budget: Budget | str | None = None) -> set[str]:
+    """The names of the runs recorded for ``figure`` at ``budget`` (empty if none)."""
+    directory = recorded_dir(figure, budget)
+    if not (directory / "runs.csv").exists():
+        return set()
+    return set(_read_set(directory)[0]["run"])
+
+
+def load_recorded(figure: str, budget: Budget | str | None = None) -> dict[str, list[pd.DataFrame]]:
+    """The recorded runs of ``figure`` at ``budget``: method → one frame per run (seed order),
+    as :meth:`vslbook.results.RunDir.metrics_frame` gives it (a ``step`` column and one
+    column per metric, NaN where a row lacks it); ``frame.attrs`` holds ``run`` and ``seed``.
+
+    Methods come in the figure's order. Raises ``ValueError`` when nothing is recorded.
+    """
+    directory = recorded_dir(figure, budget)
+    runs, evals, _ = _read_set(directory)
+    if runs.empty:
+        raise ValueError(f"no runs of {figure} recorded in {directory}; record them with "
+                         f"vslbook record {figure} --budget {get_budget(budget).name}")  # fmt: skip
+    order = list(dict.fromkeys(r.method for r in figure_runs(figure, budget)))
+    methods = order + sorted(set(runs["method"]) - set(order))
+    out: dict[str, list[pd.DataFrame]] = {}
+    for method in methods:
+        for row in runs[runs["method"] == method].sort_values(["seed", "run"]).itertuples():
+            long = evals[evals["run"] == row.run]
+            wide = long.pivot(index="step", columns="metric", values="value")
+            frame = wide.reset_index().rename_axis(columns=None)
+            frame.attrs.update(run=row.run, seed=int(row.seed))
+            out.setdefault(method, []).append(frame)
+    return out
+
+
+# --------------------------------------------------------------------------- recording
+
+
+@dataclass
+class RecordReport:
+    """What :func:`record` did: the set's folder, the runs recorded from the root, the runs
+    kept from an earlier recording, and the needed runs not recorded (name, state, detail)."""
+
+    figure: str
+    budget: str
+    root: Path
+    out_dir: Path
+    needed: list[str]
+    recorded: list[str] = field(default_factory=list)
+    kept: list[str] = field(default_factory=list)
+    skipped: list[tuple[str, str, str]] = field(default_factory=list)
+    in_set: set[str] = field(default_factory=set)
+
+
+def _state(rd: RunDir, length: int, unit: str) -> tuple[str, str]:
+    """(state, detail) of a run directory; state ``ok`` means it can be recorded."""
+    if not (rd.path / RunDir.CONFIG).is_file():
+        return "missing", ""
+    if rd.failed:
+        return "failed", str((rd.failure or {}).get("message", ""))
+    if not rd.done:
+        rows = rd.metrics()
+        return "partial", f"{int(rows[-1].get(unit, 0) or 0) if rows else 0}/{length} {unit}"
+    try:
+        rd.check_done()
+    except RunDirError:
+        return "damaged", "its DONE does not match metrics.jsonl"
+    if not rd.code_matches:
+        return "stale", "made by other code"
+    return "ok", ""
+
+
+def _wall_time(rd: RunDir, rows: list[dict[str, Any]], env: dict[str, Any]) -> tuple[float, str]:
+    """Seconds the run trained and how that was measured."""
+    times = [r["iteration_seconds"] for r in rows if r.get("iteration_seconds") is not None]
+    if times:
+        return float(sum(times)), "sum of iteration_seconds"
+    try:
+        started = datetime.fromisoformat(env["timestamp"]).timestamp()
+    except (KeyError, TypeError, ValueError):
+        return math.nan, "unknown"
+    done = (rd.path / RunDir.DONE).stat().st_mtime
+    return max(0.0, round(done - started, 3)), "DONE mtime minus env.json timestamp"
+
+
+def _provenance(rd: RunDir, run: Any, earlier: dict[str, Any] | None) -> dict[str, Any]:
+    env, config = rd.env, rd.config
+    rows = rd.metrics()
+    wall, wall_from = _wall_time(rd, rows, env)
+    done = json.loads((rd.path / RunDir.DONE).read_text(encoding="utf-8"))
+    entry = {
+        "method": run.method, "algo": run.algo, "env": run.env,
+        "seed": config.get("seed"), "budget": config.get("budget"), "config": config,
+        "config_hash": rd.config_hash, "code_hash": env.get("code_hash"),
+        "code_excluded": env.get("code_excluded", []), "git_sha": env.get("git_sha"),
+        "git_dirty": env.get("git_dirty"), "packages": env.get("packages"),
+        "hostname": env.get("hostname"), "python": env.get("python"),
+        "platform": env.get("platform"), "started": env.get("timestamp"),
+        "wall_seconds": None if math.isnan(wall) else wall, "wall_from": wall_from,
+        "metrics": done.get("metrics"),
+    }  # fmt: skip
+    same = earlier is not None and all(earlier.get(k) == entry[k] for k in entry)
+    now = datetime.now(UTC).isoformat(timespec="seconds")
+    entry["recorded"] = earlier["recorded"] if same else now
+    return entry
+
+
+def record(figure: str, budget: Budget | str | None = None,
+           root: str | os.PathLike[str] = "runs") -> RecordReport:  # fmt: skip
+    """Record the finished runs of ``figure`` at ``budget`` from ``root`` into
+    :func:`recorded_dir` (see the module's docstring for the files).
+
+    A run is recorded when it is ``DONE``, passes ``check_done()`` and was made by the
+    running code; runs recorded earlier and not recordable from ``root`` now are kept. A
+    run unchanged since its earlier recording keeps its date, so recording twice writes
+    the same bytes. Nothing is written when no run is recordable and none was recorded.
+
+    Raises:
+        ValueError: an unknown figure or budget, or ``root`` is not a folder.
+        vslbook.data.DataIntegrityError: the set's earlier tables fail their registry.
+    """
+    runs = figure_runs(figure, budget)
+    b = get_budget(budget)
+    root = Path(root)
+    if not root.is_dir():
+        raise ValueError(f"root {str(root)!r} is not a folder; expected the folder that holds "
+                         "the run directories (vslbook run --root)")  # fmt: skip
+    out = recorded_dir(figure, b)
+    old_runs, old_evals, old_prov = _read_set(out)
+    report = RecordReport(figure, b.name, root, out, [r.name for r in runs])
+    fresh: dict[str, tuple[RunDir, Any]] = {}
+    for run in runs:
+        rd = RunDir(root / run.name)
+        state, detail = _state(rd, run.length, run.unit)
+        if state == "ok":
+            fresh[run.name] = (rd, run)
+            report.recorded.append(run.name)
+        else:
+            report.skipped.append((run.name, state, detail))
+    kept = sorted(set(old_runs["run"]) - set(fresh))
+    report.kept = kept
+    report.in_set = set(fresh) | set(kept)
+    if not report.in_set:
+        return report
+    run_rows = {name: row for name, row in zip(old_runs["run"], old_runs.to_dict("records"),
+                                               strict=True) if name in kept}  # fmt: skip
+    provenance = {name: old_prov[name] for name in kept if name in old_prov}
+    for name, (rd, run) in fresh.items():
+        config = rd.config
+        run_rows[name] = {"run": name, "figure": figure, "method": run.method, "algo": run.algo,
+                          "env": run.env, "seed": int(config.get("seed", run.seed)),
+                          "budget": str(config.get("budget", b.name)),
+                          "config_hash": rd.config_hash, "status": rd.status}  # fmt: skip
+        provenance[name] = _provenance(rd, run, old_prov.get(name))
+    names = sorted(run_rows)
+    runs_frame = pd.DataFrame([run_rows[n] for n in names], columns=RUNS_COLUMNS)
+    runs_frame["seed"] = runs_frame["seed"].astype("int64")
+    parts = [evals_frame([fresh[n][0]]) if n in fresh else old_evals[old_evals["run"] == n]
+             for n in names]  # fmt: skip
+    evals = pd.concat(parts, ignore_index=True).astype(
+        {"run": str, "step": "int64", "metric": str, "value": "float64"})  # fmt: skip
+    out.mkdir(parents=True, exist_ok=True)
+    body = {"figure": figure, "budget": b.name, "runs": {n: provenance[n] for n in names}}
+    files = {"runs.csv": csv_bytes(runs_frame), "evals.csv.gz": gzip_bytes(csv_bytes(evals)),
+             PROVENANCE: json_bytes(body)}  # fmt: skip
+    for name, data in files.items():
+        atomic_write(out / name, data)
+        register_file(out / name, _DESCRIPTIONS[name])
+    return report
+
+
+def record_text(report: RecordReport) -> str:
+    """One line per run of the figure (recorded, or not recorded with its state), then a
+    summary: how many of the runs the figure needs are recorded, and where."""
+    lines = []
+    skipped = {name: (state, detail) for name, state, detail in report.skipped}
+    for name in report.needed:
+        if name not in skipped:
+            lines.append(f"recorded      {name}")
+            continue
+        state, detail = skipped[name]
+        notes = [detail] if detail else []
+        if name in report.kept:
+            notes.append("recorded earlier: kept")
+        extra = f"  ({'; '.join(notes)})" if notes else ""
+        lines.append(f"not recorded  {state:8s} {name}{extra}")
+    have = len(set(report.needed) & report.in_set)
+    where = (f"in {report.out_dir} ({len(report.recorded)} from {report.root}, "
+             f"{len(report.kept)} kept)" if report.in_set else "(nothing written)")  # fmt: skip
+    lines.append(f"{have} of {len(report.needed)} runs of {report.figure} at {report.budget} "
+                 f"recorded {where}")  # fmt: skip
+    return "\n".join(lines)
+
+
+# --------------------------------------------------------------------------- results
+
+
+def _stale(entry: dict[str, Any]) -> bool:
+    """True when the code the run can reach now is not the code that made it."""
+    excluded = tuple(entry.get("code_excluded") or ())
+    return entry.get("code_hash") != code_fingerprint(excluded)
+
+
+def _number(value: float) -> float | None:
+    return float(value) if math.isfinite(value) else None
+
+
+def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
+    """One row per recorded (figure, method, budget), in figure, budget and method order.
+
+    Keys: ``figure``, ``method``, ``task``, ``budget``, ``seeds`` (runs with a final value),
+    ``metric`` (the one the figure plots), ``iqm``, ``ci_low``, ``ci_high`` (IQM of each
+    run's final evaluation, i.e. its last row with the metric, with a 95 % stratified
+    bootstrap over seeds: seed 0, the budget's ``bootstrap_reps`` but at most
+    :data:`MAX_REPS`; None where no run has a value) and ``stale`` (a run's recorded code
+    fingerprint differs from what the same files give now).
+    """
+    from vslbook import stats
+
+    rows = []
+    for figure in figures or list(FIGURE_MODULES):
+        task, metric = figure_info(figure)
+        for b in BUDGETS.values():
+            directory = recorded_dir(figure, b)
+            if not (directory / "runs.csv").exists():
+                continue
+            runs, evals, provenance = _read_set(directory)
+            finals = evals[(evals["metric"] == metric) & evals["value"].notna()]
+            finals = finals.sort_values(["run", "step"], kind="stable").groupby("run").last()
+            order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
+            methods = order + sorted(set(runs["method"]) - set(order))
+            for method in methods:
+                names = sorted(runs.loc[runs["method"] == method, "run"])
+                if not names:
+                    continue
+                values = np.array([finals.loc[n, "value"] for n in names if n in finals.index])
+                iqm = low = high = math.nan
+                if len(values):
+                    point, ci = stats.interval_estimates(
+                        {method: values[:, None]}, reps=min(b.bootstrap_reps, MAX_REPS), seed=0)
+                    iqm, low, high = point[method][0], ci[method][0, 0], ci[method][1, 0]
+                rows.append({
+                    "figure": figure, "method": method, "task": task, "budget": b.name,
+                    "seeds": len(values), "metric": metric, "iqm": _number(iqm),
+                    "ci_low": _number(low), "ci_high": _number(high),
+                    "stale": any(_stale(provenance.get(n, {})) for n in names),
+                })  # fmt: skip
+    return rows
+
+
+def results_text(rows: list[dict[str, Any]]) -> str:
+    """:func:`result_rows` as an aligned table (a note when nothing is recorded)."""
+    if not rows:
+        return (f"no recorded run sets in {results_dir()}; record one with "
+                "vslbook record FIGURE --budget B --root DIR")  # fmt: skip
+
+    def num(x: float | None) -> str:
+        return "-" if x is None else f"{x:.4g}"
+
+    head = ("figure", "method", "task", "budget", "seeds", "metric", "IQM [95% CI]", "stale")
+    table = [head] + [
+        (r["figure"], r["method"], r["task"], r["budget"], str(r["seeds"]), r["metric"],
+         f"{num(r['iqm'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]",
+         "stale" if r["stale"] else "")
+        for r in rows
+    ]  # fmt: skip
+    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
+    return "\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
+                     for row in table)  # fmt: skip

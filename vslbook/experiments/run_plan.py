@@ -1,0 +1,181 @@
+"""Every figure's runs, declared once per budget, and what a root still needs of them.
+
+A chapter module declares, for each of its figures, the runs the figure draws at a budget
+as :class:`FigureRun` values (algorithm, env, seed, the config overrides, how long the run
+is): :func:`figure_runs` collects them. Everything that trains or reads a figure's runs
+uses this one declaration:
+
+* ``vslbook run ALGO --env ENV --seed S --budget B`` trains the run a figure uses at ``B``
+  (a figure's runs carry no overrides the command line would not apply itself), so
+  ``vslbook run ... --dry-run`` prints the names :func:`plan` lists;
+* the notebooks and ``vslbook figure`` train (or reuse) them with :meth:`FigureRun.train`;
+* :func:`plan` (``vslbook plan FIGURE``) says for each run whether it is ``done``,
+  ``partial`` (and how far), ``missing``, ``stale`` (made by other code) or ``recorded``
+  (in ``data/results/``), and estimates the core-hours left from the per-iteration times
+  the runs in the root measured.
+
+Chapters registered here: 4 (:mod:`vslbook.experiments.diskill_runs`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import math
+import statistics
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vslbook.budget import Budget, get_budget
+
+__all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "plan_text"]
+
+#: figure id → the chapter module whose ``figure_runs(figure, budget)`` declares its runs
+FIGURE_MODULES: dict[str, str] = {
+    f"fig4-{n}": "vslbook.experiments.diskill_runs"
+    for n in ("3b", "3c", "4a", "4b", "4c", "4d")
+}
+
+
+@dataclass(frozen=True)
+class FigureRun:
+    """One run a figure draws.
+
+    Attributes:
+        figure: the figure's id (``vslbook figures``), e.g. ``fig4-3c``.
+        method: the method's key in the figure (its legend entry).
+        algo, env, seed, budget: what ``vslbook run`` takes.
+        length: the run's length in ``unit``.
+        unit: the metrics column that counts progress (``step`` or e.g. ``env_steps``).
+        overrides: config fields set beside the budget's preset (empty for a figure whose
+            preset is the command line's).
+    """
+
+    figure: str
+    method: str
+    algo: str
+    env: str
+    seed: int
+    budget: str
+    length: int
+    unit: str = "step"
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        """The run directory's name (:func:`vslbook.training.run_name`)."""
+        from vslbook.training import run_name
+
+        return run_name(self.algo, self.env, self.seed, self.budget,
+                        overrides=self.overrides or None)  # fmt: skip
+
+    def train(self, root: str | Path = "runs", *, progress: bool = False, **kwargs: Any) -> Path:
+        """Train (or reuse, when finished) this run in ``root``; its run directory.
+
+        Raises:
+            RuntimeError: the run diverged (its ``FAILED`` record in the message).
+        """
+        from vslbook.training import run
+
+        rd = run(self.algo, self.env, self.seed, self.budget, root=root,
+                 overrides=self.overrides or None, progress=progress, **kwargs)  # fmt: skip
+        if rd.failed:
+            raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
+        return rd.path
+
+    def command(self, root: str | Path = "runs") -> str:
+        """The ``vslbook run`` command line that trains this run."""
+        sets = "".join(f" --set {k}={v}" for k, v in self.overrides.items())
+        return (f"vslbook run {self.algo} --env {self.env} --seed {self.seed} "
+                f"--budget {self.budget}{sets} --root {root}")  # fmt: skip
+
+
+def figure_runs(figure: str, budget: Budget | str | None = None) -> list[FigureRun]:
+    """The runs ``figure`` draws at ``budget``, as its chapter module declares them.
+
+    Raises:
+        ValueError: a figure with no declared runs (the message lists those with).
+    """
+    if figure not in FIGURE_MODULES:
+        raise ValueError(
+            f"figure {figure!r} declares no runs; expected one of {', '.join(FIGURE_MODULES)}"
+        )
+    module = importlib.import_module(FIGURE_MODULES[figure])
+    return list(module.figure_runs(figure, get_budget(budget)))
+
+
+@dataclass(frozen=True)
+class PlanRow:
+    """One run of a plan: its state, progress and estimated core-hours left."""
+
+    run: FigureRun
+    state: str  # done | partial | missing | stale | recorded | failed
+    progress: int = 0  # units done (``run.unit``)
+    seconds_per_unit: float = math.nan  # measured by this run, or its method's others
+
+    @property
+    def hours_left(self) -> float:
+        if self.state in ("done", "recorded", "failed"):
+            return 0.0
+        return (self.run.length - self.progress) * self.seconds_per_unit / 3600.0
+
+
+def _state(path: Path, unit: str) -> tuple[str, int, list[float]]:
+    """(state, progress, per-unit seconds measured) of the run directory ``path``."""
+    from vslbook.results import RunDir
+
+    if not (path / RunDir.CONFIG).is_file():
+        return "missing", 0, []
+    rd = RunDir(path)
+    rows = rd.metrics()
+    progress = int(rows[-1].get(unit, 0) or 0) if rows else 0
+    times = [r["iteration_seconds"] for r in rows if r.get("iteration_seconds") is not None]
+    if rd.failed:
+        return "failed", progress, times
+    if not rd.code_matches:
+        return "stale", progress, times
+    return ("done" if rd.done else "partial"), progress, times
+
+
+def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "runs",
+         recorded: Callable[[FigureRun], bool] | None = None) -> list[PlanRow]:  # fmt: skip
+    """The state of every run ``figure`` needs at ``budget`` in ``root``.
+
+    ``recorded(run)`` says whether a run missing from ``root`` is in ``data/results/``.
+    A run's seconds per unit are its own median measurement, else the median of its
+    method's other runs in the plan, else NaN (not yet measured).
+    """
+    runs = figure_runs(figure, budget)
+    states = [_state(Path(root) / r.name, r.unit) for r in runs]
+    by_method: dict[tuple[str, str], list[float]] = {}
+    for r, (_, _, times) in zip(runs, states, strict=True):
+        by_method.setdefault((r.algo, r.env), []).extend(times)
+    rows = []
+    for r, (state, progress, times) in zip(runs, states, strict=True):
+        if state == "missing" and recorded is not None and recorded(r):
+            state = "recorded"
+        if state == "stale":  # trained afresh when run again
+            progress = 0
+        pool = times or by_method[(r.algo, r.env)]
+        per = statistics.median(pool) if pool and r.unit == "step" else math.nan
+        rows.append(PlanRow(r, state, progress, per))
+    return rows
+
+
+def plan_text(rows: list[PlanRow]) -> str:
+    """``<state> <run directory name>`` per run (with progress where partial), then the
+    core-hours left (one core per run) and how many runs have no time measured yet."""
+    lines = []
+    for row in rows:
+        partial = row.state == "partial"
+        extra = f" ({row.progress}/{row.run.length} {row.run.unit})" if partial else ""
+        lines.append(f"{row.state:8s} {row.run.name}{extra}")
+    todo = [r for r in rows if r.state in ("partial", "missing", "stale")]
+    known = [r.hours_left for r in todo if not math.isnan(r.hours_left)]
+    unknown = len(todo) - len(known)
+    total = f"{sum(known):.1f} core-hours left for {len(known)} runs"
+    if unknown:
+        total += f"; {unknown} runs not yet timed (train one of each method to estimate them)"
+    lines.append(total if todo else "nothing left to train")
+    return "\n".join(lines)
