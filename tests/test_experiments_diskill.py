@@ -44,7 +44,9 @@ def reacher_runs(tmp_path_factory):
     import os
 
     os.environ["VSLBOOK_WORKERS"] = "1"
-    return D.run_set("4.3c", "smoke", tmp_path_factory.mktemp("runs"))
+    # the episodic methods of Fig. 4.3c (its PPO runs: test_ppo_ch4_from_the_command_line)
+    return D.run_set("4.3c", "smoke", tmp_path_factory.mktemp("runs"),
+                     methods=("diskill", "bbrl", "lindiskill"))  # fmt: skip
 
 
 def test_run_set_and_curves(reacher_runs):
