@@ -8,49 +8,20 @@ straight arm).
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 
 from vslbook.envs.robot import make_task
+from vslbook.envs.robot.examples import EXAMPLES
 from vslbook.envs.robot.reacher5 import tip_position
 
-# Parameters that succeed (or, for the reacher, a plausible reach); the same literals as in
-# the tasks' own test files (table tennis: found by the searches described in
-# tests/test_robot_table_tennis.py; mini golf: the refit of the θ of
-# tests/test_robot_mini_golf.py to fancy-gym's ProDMP basis, least squares on the tracked
-# K_p q_d + K_d q̇_d, then a cross-entropy search on the return, population 24, numpy seed 0).
-TT_CONTEXT = np.array([-0.5, 0.0, -0.57, -0.11])
-TT_THETA = np.array([
-    1.008634, 0.417206, -0.244005, -0.912505, -0.316006, -0.941875, -0.15136, -0.064655,
-    -2.280435, -1.318363, -0.102644, -0.479637, -0.110751, 0.465268, -3.829837, -0.997936,
-    -0.70222, 0.618083, 1.017525, 0.221885, -0.252506, -0.033285, -0.379723,
-])  # fmt: skip
-MG_CONTEXT = np.array([0.3, -0.5, 0.44, 0.525])
-MG_THETA = np.array([
-    1.412648, -0.697413, -0.47867, -0.48046, -0.748003, -1.721859, -0.212927, 1.487021,
-    1.3175, -1.251709, 1.06103, 0.174545, -1.68043, -1.602168, -2.241059, -1.492407,
-    0.136616, -0.712911, 0.804888, 0.305455, 0.527284, -0.997824, -0.844455, -0.389246,
-    0.016353, -0.862963, 0.924912, 0.947544, 0.27086,
-])  # fmt: skip
-BP_CONTEXT = np.array([0.0, -1.7])
-BP_THETA = np.array([
-    6.42637424e-01, -6.67687292e-01, 1.63244006e-01, -6.83075196e00, -3.65419193e00,
-    -7.04139562e-01, -4.53074444e-01, -5.56583802e00, -4.84612128e00, -5.87602670e-03,
-    7.67789135e-01, -6.10486646e-01, -1.85773959e-01, -1.41648937e00, -8.27402227e-01,
-])  # fmt: skip
-BPO_CONTEXT = np.array([0.35, -0.2, math.pi, 0.58, 0.05])
-BPO_THETA = np.array([
-    0.432, -0.4569, -1.3418, -1.1043, 0.1331, -1.1854, -0.6359,
-    -0.5922, 0.2453, -0.6642, -1.2187, -1.8743, -0.5781, -1.5945,
-    -0.0838, -0.587, 0.5485, -0.0942, -0.4841, 0.5219, -0.3138,
-    -0.1061, 0.1833, 0.1271, 0.2161, -1.5723, -2.2373, -2.8444,
-])  # fmt: skip
-HJ_CONTEXT = np.array([-0.25, -0.1, 0.4, 0.8])
-HJ_THETA = np.array(
-    [0.743, 0.592, -0.242, 0.187, 6.486, 1.668, -0.948, 1.052, 4.139, -5.249, -0.331, -4.092]
-)
+# Parameters that succeed (or, for the hopper, a jump): the book's examples
+# (vslbook.envs.robot.examples, where each task's test file says how its θ was found).
+TT_THETA, TT_CONTEXT = EXAMPLES["table-tennis-4d"].arrays()
+MG_THETA, MG_CONTEXT = EXAMPLES["mini-golf"].arrays()
+BP_THETA, BP_CONTEXT = EXAMPLES["beer-pong"].arrays()
+BPO_THETA, BPO_CONTEXT = EXAMPLES["box-pushing-obstacle"].arrays()
+HJ_THETA, HJ_CONTEXT = EXAMPLES["hopper-jump"].arrays()
 
 
 def _one(task, theta, context):
