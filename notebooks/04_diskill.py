@@ -1343,3 +1343,16 @@ fig.suptitle(f"Fig. B.3 (ours, budget {budget.name}: {c['iterations']} iteration
 fig.tight_layout()
 save_figure(fig, "fig-b-3-hopper")
 plt.show()
+
+# %% [markdown]
+# ## 12. Settings against the authors' code
+#
+# The hyper-parameters of Tables B.2-B.7 (Di-SkilL, BBRL, LinDi-SkilL, Di-SkilLV2/V3, PPO)
+# next to the Di-SkilL configurations that made the figures (published for TT-H, HJ, BPO and
+# MG only); the `ours` column is read from `diskill_config` and `ppo_ch4_config`. `≠ code`
+# marks where a run would differ from the code behind the figure.
+
+# %%
+from vslbook.experiments.audit import algorithm_audit, show_audit
+
+show_audit(algorithm_audit(4), only_differences=True)
