@@ -66,7 +66,8 @@ def test_a_budget_changes_only_counts():
     full, reduced = _preset("svsl", "vslbook/BeerPong-v0"), _preset("svsl", "vslbook/BeerPong-v0",
                                                                       "reduced")  # fmt: skip
     counts = {"n_experts", "iterations_per_expert", "weight_iterations", "test_every",
-              "test_contexts"}  # fmt: skip
+              "test_contexts", "entropy_draws", "entropy_grid", "entropy_contexts",
+              "entropy_every"}  # fmt: skip  (the entropy probe's sizes are counts too)
     for name in full.__dataclass_fields__:
         if name not in counts:
             assert getattr(full, name) == getattr(reduced, name), name

@@ -99,7 +99,7 @@ def test_smoke_runs_give_curve_rows(smoke_runs):
     assert set(smoke_runs) == set(T.METHODS)
     for method, (path,) in smoke_runs.items():
         rd = RunDir.open(path)
-        assert rd.done and rd.config["env"] == T.TASK
+        assert rd.done and rd.config["env"] == "vslbook/TableTennisCh3-v0"  # `vslbook run`'s run
         df = rd.metrics_frame()
         assert np.all(np.diff(df["samples"]) >= 0)
         tested = df.dropna(subset=["test_return"])
@@ -185,6 +185,6 @@ def test_entropy_every_thins_the_entropy_test_points():
     """Full budget: E_c H[π(θ | c)] at every 8th test point and at the end only."""
     assert T.table_tennis_counts("full")["entropy_every"] == 8
     extra = {"entropy_every": 3}
-    due = [it for it in range(1, 21) if T.mx._entropy_due(it, 2, 20, extra)]
+    due = [it for it in range(1, 21) if T.mx.entropy_due(it, 2, 20, extra)]
     assert due == [6, 12, 18, 20]
-    assert [it for it in range(1, 7) if T.mx._entropy_due(it, 2, 7, {})] == [2, 4, 6]
+    assert [it for it in range(1, 7) if T.mx.entropy_due(it, 2, 7, {})] == [2, 4, 6]

@@ -251,7 +251,7 @@ def test_plan_marks_recorded_runs(root, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["record", "fig9-9"], "figure 'fig9-9' declares no runs; expected one of fig4-3b"),
+        (["record", "fig9-9"], "figure 'fig9-9' declares no runs; expected one of fig3-2, fig4-3b"),
         (["record", FIGURE, "--budget", "huge"], "unknown budget 'huge'; expected one of"),
         (["record", FIGURE, "--root", "{file}"], "is not a folder; expected the folder that"),
         (["record", FIGURE, "--root", "{missing}"], "is not a folder; expected the folder"),

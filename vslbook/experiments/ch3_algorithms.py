@@ -40,7 +40,7 @@ from vslbook.erl.svsl_config import SVSLConfig
 from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir
 
-__all__ = ["HiREPSRun", "LaDiPSRun", "PPORun", "SVSLRun", "task_of"]
+__all__ = ["EntropyProbe", "HiREPSRun", "LaDiPSRun", "PPORun", "SVSLRun", "env_of", "task_of"]
 
 #: Rewards of the Chapter 3 5-link reacher (Eqs. 3.8, 3.9, 3.10).
 REWARDS = ("3.8", "3.9", "3.10")
@@ -68,8 +68,43 @@ def _check_reward(reward: Any, env: str, required: bool) -> str | None:
 
 
 @dataclass(frozen=True)
-class SVSLRun(SVSLConfig):
-    """:class:`SVSLConfig` and the task's option: the 5-link reacher's reward."""
+class EntropyProbe:
+    """Where a run estimates the expected mixture entropy E_c H[π(θ | c)] at its test
+    points (Figs. A.1, A.2; :func:`vslbook.experiments.svsl_context.entropy_contexts`):
+    ``entropy_draws`` θ per context on an ``entropy_grid`` of cells or on
+    ``entropy_contexts`` draws from p(c), at every ``entropy_every``-th test point. None:
+    not estimated."""
+
+    entropy_draws: int | None = None
+    entropy_grid: tuple[int, ...] | None = None
+    entropy_contexts: int | None = None
+    entropy_every: int = 1
+
+    def entropy_spec(self) -> dict[str, Any] | None:
+        """The probe as the dict :func:`entropy_contexts` reads, or None."""
+        if self.entropy_draws is None:
+            return None
+        spec: dict[str, Any] = {"entropy_draws": self.entropy_draws,
+                                "entropy_every": self.entropy_every}  # fmt: skip
+        if self.entropy_grid is not None:
+            spec["entropy_grid"] = list(self.entropy_grid)
+        else:
+            spec["entropy_contexts"] = self.entropy_contexts
+        return spec
+
+
+def _entropy_fields(counts: dict[str, Any]) -> dict[str, Any]:
+    """The :class:`EntropyProbe` fields of a task's counts (beer pong, table tennis)."""
+    return {"entropy_draws": counts["entropy_draws"],
+            "entropy_grid": tuple(counts["entropy_grid"]) if "entropy_grid" in counts else None,
+            "entropy_contexts": counts.get("entropy_contexts"),
+            "entropy_every": counts.get("entropy_every", 1)}  # fmt: skip
+
+
+@dataclass(frozen=True)
+class SVSLRun(EntropyProbe, SVSLConfig):
+    """:class:`SVSLConfig`, the task's option (the 5-link reacher's reward) and the
+    entropy probe of Figs. A.1 / A.2."""
 
     reward: str | None = None  #: "3.8", "3.9" or "3.10" on the 5-link reacher, else None
 
@@ -80,16 +115,18 @@ class SVSLRun(SVSLConfig):
 
 
 @dataclass(frozen=True)
-class HiREPSRun(HiREPSConfig):
-    """:class:`HiREPSConfig` and the test protocol (every ``test_every`` iterations)."""
+class HiREPSRun(EntropyProbe, HiREPSConfig):
+    """:class:`HiREPSConfig`, the test protocol (every ``test_every`` iterations) and the
+    entropy probe."""
 
     test_every: int = 50
     test_contexts: int = 200
 
 
 @dataclass(frozen=True)
-class LaDiPSRun(LaDiPSConfig):
-    """:class:`LaDiPSConfig` and the test protocol (every ``test_every`` iterations)."""
+class LaDiPSRun(EntropyProbe, LaDiPSConfig):
+    """:class:`LaDiPSConfig`, the test protocol (every ``test_every`` iterations) and the
+    entropy probe."""
 
     test_every: int = 50
     test_contexts: int = 200
@@ -109,6 +146,15 @@ def _as(cls: type, config: Any, **extra: Any) -> Any:
     names = {f.name for f in dataclasses.fields(cls)}
     fields = {k: v for k, v in dataclasses.asdict(config).items() if k in names}
     return cls(**(fields | extra))
+
+
+def env_of(task: str) -> str:
+    """The one-step env id of a Chapter 3 task (``beer-pong`` → ``vslbook/BeerPong-v0``)."""
+    for env, name in SVSL_ENVS.items():
+        if name == task:
+            return env
+    raise ValueError(f"task {task!r} has no Chapter 3 preset; expected one of "
+                     f"{sorted(SVSL_ENVS.values())}")  # fmt: skip
 
 
 def task_of(env: str, table: dict[str, str]) -> str:
@@ -141,7 +187,9 @@ def svsl_defaults(env: str, budget: Budget, overrides: dict[str, Any]) -> SVSLRu
         return _as(SVSLRun, svsl_reacher.reacher_configs(reward, budget)[0], reward=reward)
     if reward is not None:
         raise ValueError(f"reward= only applies to vslbook/Reacher5Ch3-v0, not {env}")
-    return _as(SVSLRun, svsl_mixtures.method_config(task, "SVSL", _counts(task, budget)))
+    counts = _counts(task, budget)
+    return _as(SVSLRun, svsl_mixtures.method_config(task, "SVSL", counts),
+               **_entropy_fields(counts))  # fmt: skip
 
 
 def _baseline_defaults(method: str, cls: type, envs: dict[str, str]):
@@ -152,13 +200,15 @@ def _baseline_defaults(method: str, cls: type, envs: dict[str, str]):
         if task == "planar-reacher":  # Fig. 3.1: HiREPS only, SVSL's test protocol
             config = svsl_planar.variant_config("HiREPS", budget)
             svsl = svsl_planar.variant_config("SVSL", budget)
+            probe: dict[str, Any] = {}
         else:
             counts = _counts(task, budget)
             config = svsl_mixtures.method_config(task, method, counts)
             svsl = svsl_mixtures.method_config(task, "SVSL", counts)
+            probe = _entropy_fields(counts)
         points = max(1, svsl.total_iterations // svsl.test_every)  # as many tests as SVSL
         every = max(1, config.iterations // points)
-        return _as(cls, config, test_every=every, test_contexts=svsl.test_contexts)
+        return _as(cls, config, test_every=every, test_contexts=svsl.test_contexts, **probe)
 
     defaults.__doc__ = f"{method}'s configuration of an env at a budget (its task preset)."
     return defaults
@@ -190,8 +240,10 @@ def train_svsl(
     from vslbook.erl.ppo import evaluation_goals
     from vslbook.erl.svsl import SVSL
     from vslbook.erl.svsl import train as train_loop
+    from vslbook.experiments.svsl_context import entropy_contexts, entropy_due, svsl_entropy
 
     config = config_from_record(SVSLRun, record)
+    probe = config.entropy_spec()
     task_name = task_of(record["env"], SVSL_ENVS)
     seed = int(record["seed"])
     task = make_task(task_name, **({} if config.reward is None else {"reward": config.reward}))
@@ -208,7 +260,13 @@ def train_svsl(
         with tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
                   desc=f"svsl {task_name} s{seed}") as bar:  # fmt: skip
 
+            contexts = None if probe is None else entropy_contexts(task_name, probe)
+
             def log(it: int, metrics: dict[str, float]) -> None:
+                if contexts is not None and "test_return" in metrics and entropy_due(
+                    it, config.test_every, config.total_iterations, probe
+                ):  # Figs. A.1, A.2
+                    metrics["expected_entropy"] = svsl_entropy(s, contexts, probe["entropy_draws"])
                 rd.log(it, **metrics)
                 bar.update(1)
 
@@ -236,6 +294,7 @@ def _train_baseline(method: str, cls: type, base: type, envs: dict[str, str]):
         task = make_task(task_of(record["env"], envs))
         seed = int(record["seed"])
         tests = {"test_every": config.test_every, "test_contexts": config.test_contexts}
+        tests |= config.entropy_spec() or {}
         try:
             algo = train_baseline(
                 rd, task, method, _as(base, config), seed, tests, stop_after=stop_after,

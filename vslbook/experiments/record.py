@@ -58,7 +58,7 @@ from vslbook.provenance import code_fingerprint
 from vslbook.results import RunDir, RunDirError
 
 __all__ = [
-    "RUNS_COLUMNS", "RecordReport", "figure_info", "load_recorded", "record", "record_text",
+    "RUNS_COLUMNS", "RecordReport", "figure_metric", "load_recorded", "record", "record_text",
     "recorded_dir", "recorded_names", "result_rows", "results_text",
 ]  # fmt: skip
 
@@ -95,12 +95,23 @@ def recorded_dir(figure: str, budget: Budget | str | None = None) -> Path:
     return results_dir() / _check_figure(figure) / get_budget(budget).name
 
 
-def figure_info(figure: str) -> tuple[str, str]:
-    """(task, plotted metric) of ``figure``, from its chapter module's ``FIGURES`` and
-    ``METRIC`` (keyed ``4.3c`` for ``fig4-3c``)."""
+def figure_metric(figure: str) -> str:
+    """The metric ``figure`` plots, from its chapter module's ``METRIC`` (keyed ``4.3c`` for
+    ``fig4-3c`` in Chapter 4, by figure id in Chapter 3)."""
     module = importlib.import_module(FIGURE_MODULES[_check_figure(figure)])
     key = figure.removeprefix("fig").replace("-", ".")
-    return module.FIGURES[key][0], module.METRIC[key]
+    return module.METRIC[key] if key in module.METRIC else module.METRIC[figure]
+
+
+def task_of_env(env: str) -> str:
+    """The task name of a Chapter 3 or 4 env id (the id itself for any other)."""
+    from vslbook.experiments import ch3_algorithms, ch4_algorithms
+
+    for table in (ch3_algorithms.SVSL_ENVS, ch3_algorithms.PPO_ENVS,
+                  ch4_algorithms.DISKILL_ENVS, ch4_algorithms.PPO_ENVS):  # fmt: skip
+        if env in table:
+            return table[env]
+    return env
 
 
 # --------------------------------------------------------------------------- reading a set
@@ -348,7 +359,7 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
 
     rows = []
     for figure in figures or list(FIGURE_MODULES):
-        task, metric = figure_info(figure)
+        metric = figure_metric(figure)
         for b in BUDGETS.values():
             directory = recorded_dir(figure, b)
             if not (directory / "runs.csv").exists():
@@ -358,8 +369,11 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
             finals = finals.sort_values(["run", "step"], kind="stable").groupby("run").last()
             order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
             methods = order + sorted(set(runs["method"]) - set(order))
-            for method in methods:
-                names = sorted(runs.loc[runs["method"] == method, "run"])
+            pairs = [(m, env) for m in methods
+                     for env in dict.fromkeys(runs.loc[runs["method"] == m, "env"])]  # fmt: skip
+            for method, env in pairs:  # one row per task of the figure (Fig. 3.2 has two)
+                task = task_of_env(env)
+                names = sorted(runs.loc[(runs["method"] == method) & (runs["env"] == env), "run"])
                 if not names:
                     continue
                 values = np.array([finals.loc[n, "value"] for n in names if n in finals.index])

@@ -14,7 +14,8 @@ uses this one declaration:
   (in ``data/results/``), and estimates the core-hours left from the per-iteration times
   the runs in the root measured.
 
-Chapters registered here: 4 (:mod:`vslbook.experiments.diskill_runs`).
+Chapters registered here: 3 (Fig. 3.2, :mod:`vslbook.experiments.ch3_runs`) and 4
+(:mod:`vslbook.experiments.diskill_runs`).
 """
 
 from __future__ import annotations
@@ -33,9 +34,10 @@ __all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "pla
 
 #: figure id → the chapter module whose ``figure_runs(figure, budget)`` declares its runs
 FIGURE_MODULES: dict[str, str] = {
-    f"fig4-{n}": "vslbook.experiments.diskill_runs"
-    for n in ("3b", "3c", "4a", "4b", "4c", "4d")
-}
+    "fig3-2": "vslbook.experiments.ch3_runs",
+    **{f"fig4-{n}": "vslbook.experiments.diskill_runs"
+       for n in ("3b", "3c", "4a", "4b", "4c", "4d")},
+}  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -167,7 +167,7 @@ def run_beer_pong(
     ``expected_entropy`` (:func:`vslbook.experiments.svsl_mixtures.run_method`).
     ``progress``: a bar over the iterations.
     """
-    return mx.run_method(TASK, method, seed, root, beer_pong_counts(budget), progress=progress)
+    return mx.run_method(TASK, method, seed, root, budget, progress=progress)
 
 
 def draw_learning_curves(

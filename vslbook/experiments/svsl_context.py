@@ -33,11 +33,13 @@ __all__ = [
     "draw_context_gaussians",
     "draw_success_grid",
     "entropy_contexts",
+    "entropy_due",
     "expected_entropy",
     "method_config",
     "mixture_of",
     "shared_task",
     "success_grid",
+    "svsl_entropy",
     "svsl_episodes",
 ]
 
@@ -242,7 +244,13 @@ def expected_entropy(mix: MixtureModel, contexts: np.ndarray, draws: int, rng) -
     return float(np.mean(np.concatenate(parts)))
 
 
-def _svsl_entropy(s: SVSL, contexts: np.ndarray, draws: int) -> float:
+def entropy_due(it: int, test_every: int, last: int, spec: dict[str, Any]) -> bool:
+    """Whether the test point at iteration ``it`` also estimates the expected entropy: every
+    ``spec["entropy_every"]``-th test point (default every one) and the last iteration."""
+    return it % (test_every * spec.get("entropy_every", 1)) == 0 or it == last
+
+
+def svsl_entropy(s: SVSL, contexts: np.ndarray, draws: int) -> float:
     """SVSL's expected entropy, leaving out the untrained newest expert while adding."""
     mix = MixtureModel.from_arrays(s.model.arrays())
     cfg = s.config

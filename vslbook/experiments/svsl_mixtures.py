@@ -20,7 +20,8 @@ its counts are a dict (the ``*_counts(budget)`` functions of the task modules) w
 
 What is computed here:
 
-* :func:`run_method` — one method for one seed in a resumable run directory. Rows of
+* :func:`run_method` — one method for one seed in a resumable run directory (the run
+  ``vslbook run`` trains at the same budget). Rows of
   ``metrics.jsonl`` carry ``samples`` (executed episodes; θ rejected before simulation are
   not counted, A.3.2 / A.3.3) and, at every test point, ``test_return`` and
   ``test_success`` (θ ~ π(θ | c) on fixed test contexts from p(c)) and
@@ -42,8 +43,8 @@ here:
 
 from __future__ import annotations
 
+import time
 from collections.abc import Sequence
-from dataclasses import asdict
 from pathlib import Path
 from typing import Any
 
@@ -52,14 +53,12 @@ import numpy as np
 import pandas as pd
 from tqdm.auto import tqdm
 
+from vslbook.budget import Budget
 from vslbook.erl import hireps, ladips
 from vslbook.erl.mixture_baseline import MixtureAlgorithm
 from vslbook.erl.svsl import SVSL, SVSLConfig
-from vslbook.erl.svsl import train as train_svsl
-from vslbook.experiments.erl_runs import open_run
 from vslbook.experiments.svsl_context import (
     METHODS,
-    _svsl_entropy,
     box_grid,
     check_count,
     check_method,
@@ -68,6 +67,7 @@ from vslbook.experiments.svsl_context import (
     draw_context_gaussians,
     draw_success_grid,
     entropy_contexts,
+    entropy_due,
     expected_entropy,
     method_config,
     mixture_of,
@@ -106,97 +106,30 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 # runs
 # --------------------------------------------------------------------------------------
-def _entropy_spec(counts: dict[str, Any]) -> dict[str, Any]:
-    if "entropy_grid" in counts:
-        spec: dict[str, Any] = {"entropy_grid": list(counts["entropy_grid"])}
-    else:
-        spec = {"entropy_contexts": counts["entropy_contexts"]}
-    spec["entropy_draws"] = counts["entropy_draws"]
-    if counts.get("entropy_every", 1) != 1:
-        spec["entropy_every"] = check_count("entropy_every", counts["entropy_every"])
-    return spec
-
-
-def _entropy_due(it: int, test_every: int, last: int, extra: dict[str, Any]) -> bool:
-    """Whether the test point at iteration ``it`` also estimates the expected entropy."""
-    return it % (test_every * extra.get("entropy_every", 1)) == 0 or it == last
-
-
 def run_method(
-    task: str, method: str, seed: int, root: str | Path, counts: dict[str, Any],
+    task: str, method: str, seed: int, root: str | Path, budget: Budget | str | None = None,
     *, progress: bool = False,
 ) -> Path:  # fmt: skip
-    """Train one method for one seed on ``task`` in a run directory under ``root``.
+    """Train one method for one seed on ``task`` at ``budget`` in a run directory under
+    ``root``: the run ``vslbook run svsl|hireps|ladips --env ENV --seed S --budget B``
+    trains (:mod:`vslbook.experiments.ch3_algorithms`, :func:`vslbook.training.run`).
 
     A finished run with the same configuration is reused, an unfinished one resumed. Rows
     of ``metrics.jsonl`` carry ``samples`` (executed episodes so far) and, every
     ``test_every`` iterations and at the end, ``test_return``, ``test_success`` and
     ``expected_entropy``. The baselines test as often as SVSL (the same number of test
     points over their run). ``progress``: a bar over the iterations.
+
+    Raises:
+        RuntimeError: the run diverged.
     """
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be an integer >= 0, got {seed!r}")
-    config = method_config(task, method, counts)
-    ent = _entropy_spec(counts)
-    if isinstance(config, SVSLConfig):
-        return _run_svsl(task, config, int(seed), root, ent, progress)
-    svsl_cfg = method_config(task, "SVSL", counts)
-    points = max(1, svsl_cfg.total_iterations // svsl_cfg.test_every)
-    test = {"test_every": max(1, config.iterations // points),
-            "test_contexts": counts["test_contexts"]}  # fmt: skip
-    return _run_baseline(task, method, config, int(seed), root, test | ent, progress)
+    from vslbook.experiments.ch3_algorithms import env_of
+    from vslbook.training import run
 
-
-def _run_svsl(
-    task_name: str, config: SVSLConfig, seed: int, root: str | Path, extra: dict[str, Any],
-    progress: bool = False,
-) -> Path:  # fmt: skip
-    """:func:`vslbook.erl.svsl.train` in a run directory, adding the expected entropy."""
-    record = {"algo": "svsl", "env": task_name, "task_kwargs": {}, "seed": seed} | asdict(config)
-    rd = open_run(root, record | extra)
-    if rd.done:
-        return rd.path
-    task = shared_task(task_name)
-    s = SVSL(task, config, seed)
-    saved = rd.load_checkpoint()
-    if saved is not None:
-        s.load_state_dict(saved["svsl"])
-    contexts = entropy_contexts(task_name, extra)
-    bar = tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
-               desc=f"SVSL {task_name} s{seed}")  # fmt: skip
-
-    def log(it: int, metrics: dict[str, float]) -> None:
-        if "test_return" in metrics and _entropy_due(
-            it, config.test_every, config.total_iterations, extra
-        ):
-            metrics["expected_entropy"] = _svsl_entropy(s, contexts, extra["entropy_draws"])
-        rd.log(it, **metrics)
-        bar.update(1)
-
-    with bar:
-        train_svsl(
-            task, config, seed, state=s, callback=log,
-            checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
-            checkpoint_due=rd.checkpoint_due,
-            checkpoint_every=50,
-        )  # fmt: skip
-    rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
-    return rd.path
-
-
-def _run_baseline(
-    task_name: str, method: str, config: Any, seed: int, root: str | Path, extra: dict[str, Any],
-    progress: bool = False,
-) -> Path:  # fmt: skip
-    """HiREPS or LaDiPS in a run directory, with SVSL's test protocol every ``test_every``."""
-    record = {"algo": method.lower(), "env": task_name, "seed": seed} | asdict(config)
-    rd = open_run(root, record | extra)
-    if rd.done:
-        return rd.path
-    algo = train_baseline(
-        rd, shared_task(task_name), method, config, seed, extra, workers=None, progress=progress
-    )
-    rd.mark_done({"samples": algo.total_samples, "iterations": config.iterations})
+    check_method(method)
+    rd = run(method.lower(), env_of(task), seed, budget, root=root, progress=progress)
+    if rd.failed:
+        raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
     return rd.path
 
 
@@ -235,6 +168,7 @@ def train_baseline(
     bar = tqdm(total=config.iterations, initial=algo.iterations_done, disable=not progress,
                desc=f"{method} {task.name} s{seed}")  # fmt: skip
     for i in range(algo.iterations_done, stop):
+        start = time.perf_counter()
         metrics = algo.iteration()
         metrics["samples_iteration"] = metrics.pop("samples")
         metrics["samples"] = algo.total_samples  # executed episodes so far
@@ -245,14 +179,15 @@ def train_baseline(
             out = task.evaluate(th, tests, workers=workers)
             metrics["test_return"] = float(np.mean(out.returns))
             metrics["test_success"] = float(np.mean(out.success))
-            if contexts is not None and _entropy_due(it, every, config.iterations, extra):
+            if contexts is not None and entropy_due(it, every, config.iterations, extra):
                 rng = np.random.default_rng([seed, 3, it])
                 metrics["expected_entropy"] = expected_entropy(
                     mixture_of(algo), contexts, extra["entropy_draws"], rng
                 )
+        metrics["iteration_seconds"] = time.perf_counter() - start  # tests included
         rd.log(it, **metrics)
         bar.update(1)
-        if it % 25 == 0 or it == stop:
+        if it % 25 == 0 or it == stop or rd.checkpoint_due():
             rd.save_checkpoint({"algo": algo.state_dict()})
     bar.close()
     return algo
@@ -278,8 +213,11 @@ def load_model(path: str | Path) -> Any:
     state = rd.load_checkpoint()
     if state is None:
         raise FileNotFoundError(f"{rd.path} has no checkpoint")
+    from vslbook.experiments.ch3_algorithms import SVSL_ENVS
+
     cls, config_cls, key = classes[algo]
-    model = cls(shared_task(cfg["env"]), _config_from(config_cls, cfg), int(cfg["seed"]))
+    task = SVSL_ENVS.get(cfg["env"], cfg["env"])  # an env id, or a task name (older runs)
+    model = cls(shared_task(task), _config_from(config_cls, cfg), int(cfg["seed"]))
     model.load_state_dict(state[key])
     return model
 

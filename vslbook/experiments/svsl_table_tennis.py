@@ -180,8 +180,7 @@ def run_table_tennis(
     (:func:`vslbook.experiments.svsl_mixtures.run_method`). ``progress``: a bar over the
     iterations.
     """
-    return mx.run_method(TASK, method, seed, root, table_tennis_counts(budget),
-                         progress=progress)  # fmt: skip
+    return mx.run_method(TASK, method, seed, root, budget, progress=progress)
 
 
 def run_all(
