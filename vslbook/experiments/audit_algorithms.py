@@ -387,9 +387,10 @@ def _diskill_rows() -> list[Setting]:
             where = f"{_DS}{yml} l.{line}" if yml else NOT_FOUND
             tw = f"Table {table}" if t != NOT_STATED else f"Table {table} gives none"
             why = (
-                "ours: 10 for every task (HJ's value); the code uses 1 except on HJ"
+                "code (diskill_config's CODE_SETTINGS; settings='thesis' has no value here, "
+                "so 10, HJ's, where nothing is published)"
                 if attr == "reward_baseline_batches"
-                else "thesis (Table B.5; the code's 100 made Fig. 4.4a)"
+                else "code: its 100 made Fig. 4.4a (settings='thesis' gives Table B.5's 80)"
                 if (task, attr) == ("hopper-jump", "samples_per_expert")
                 else "both agree"
                 if t == c
