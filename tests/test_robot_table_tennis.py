@@ -68,8 +68,9 @@ def random_valid_thetas(task, n, rng):
 def test_layout_matches_the_thesis():
     assert TableTennis4D.n_params == 23 == TableTennisHard.n_params
     assert TableTennis4D.context_names == ("x_ball0", "y_ball0", "x_goal", "y_goal")
-    np.testing.assert_array_equal(TableTennis4D.context_low, [-1, -0.65, -1, -0.6])
-    np.testing.assert_array_equal(TableTennis4D.context_high, [-0.2, 0.65, -0.2, 0.6])
+    # the authors' goal range (±0.65) by default; B.4.1.1's ±0.6 with settings="thesis"
+    np.testing.assert_array_equal(TableTennis4D.context_low, [-1, -0.65, -1, -0.65])
+    np.testing.assert_array_equal(TableTennis4D.context_high, [-0.2, 0.65, -0.2, 0.65])
     assert TableTennisHard.context_names[2] == "v_x"
     np.testing.assert_array_equal(TableTennisHard.context_low[2:3], [1.5])
     np.testing.assert_array_equal(TableTennisHard.context_high[2:3], [4.0])
@@ -115,7 +116,7 @@ def test_bad_contexts_give_clear_errors_or_the_penalty(task):
     with pytest.raises(ValueError, match=r"contexts must have shape \(n, 4\) \(x_ball0"):
         task.evaluate(theta, np.zeros((2, 5)), workers=0)
     with pytest.raises(ValueError, match="outside the task's context space"):
-        task.evaluate(theta, [[-0.5, 0.0, -0.6, 0.62]], workers=0)  # goal y beyond 0.6
+        task.evaluate(theta, [[-0.5, 0.0, -0.6, 0.67]], workers=0)  # goal y beyond 0.65
     with pytest.raises(ValueError, match="serve must clear the net"):
         task.evaluate(theta, [[-0.2, 0.0, -0.6, 0.0]], workers=0)  # lands past the table end
     with pytest.raises(ValueError, match=r"theta must have shape \(n, 23\)"):
@@ -123,7 +124,7 @@ def test_bad_contexts_give_clear_errors_or_the_penalty(task):
     before = task.sim_steps
     r = task.evaluate(theta, [[-0.5, 0.0, -0.6, 0.7]], workers=0, out_of_range="penalise")
     assert not r.executed[0] and task.sim_steps == before
-    assert r.returns[0] == pytest.approx(-20 * 0.1**2)
+    assert r.returns[0] == pytest.approx(-20 * 0.05**2)
 
 
 # -- reward ----------------------------------------------------------------------------------
@@ -337,3 +338,26 @@ def test_compiled_loop_stops_an_unstable_simulation_like_the_python_loop():
 def test_compiled_flag_is_checked():
     with pytest.raises(TypeError, match="compiled must be a bool, got 'yes'"):
         TableTennis4D(compiled="yes")
+
+
+@pytest.mark.parametrize("cls", [TableTennis4D, TableTennisHard])
+def test_the_code_settings_and_the_thesis_settings(cls):
+    """settings="code" (default): goal y within ±0.65 and a floor contact after the hit is a
+    landing, as in the authors' environment; settings="thesis": B.4.1.1's ±0.6 and table
+    contacts only. An explicit floor_counts_as_landing wins over either."""
+    code, thesis = cls(), cls(settings="thesis")
+    try:
+        assert code.floor_counts_as_landing and not thesis.floor_counts_as_landing
+        assert (code.context_high[-1], thesis.context_high[-1]) == (0.65, 0.6)
+        assert (code.context_low[-1], thesis.context_low[-1]) == (-0.65, -0.6)
+        np.testing.assert_array_equal(thesis.context_low[:-1], cls.context_low[:-1])
+        goal = np.r_[CONTEXT[:2], ([2.5] if cls is TableTennisHard else []), -0.6, 0.62]
+        assert code.context_valid(goal) and not thesis.context_valid(goal)
+        explicit = cls(settings="thesis", floor_counts_as_landing=True)
+        assert explicit.floor_counts_as_landing is True
+        explicit.close()
+    finally:
+        code.close()
+        thesis.close()
+    with pytest.raises(ValueError, match=r"settings must be one of \('code', 'thesis'\), got 'x'"):
+        cls(settings="x")

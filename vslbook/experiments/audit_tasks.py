@@ -179,7 +179,7 @@ _TT: list[Row] = [
      _const("table_tennis", "KD"), _CODE),
     ("floor contact after the hit counts as landing", False, "A.3.3 cond. 3, B.4.1.1 f4 ('table')",
      True, _MJ + "table_tennis/table_tennis_env.py _get_reward" + _FACTS.format("§1.1"),
-     "floor_counts_as_landing", "thesis (option floor_counts_as_landing=True gives the code's)"),
+     "floor_counts_as_landing", "code (settings=\"thesis\" gives the text's table-only rule)"),
     ("success: landing within (m) of the goal", 0.2, "B.4.1.1", 0.2,
      _MJ + "table_tennis/table_tennis_env.py" + _FACTS.format("§1.1"),
      _const("table_tennis", "SUCCESS_RADIUS"), "both agree"),
@@ -200,7 +200,7 @@ TASK_SETTINGS: list[Setting] = [
              [[-1, -0.65, -1, -0.6], [-0.2, 0.65, -0.2, 0.6]], "B.4.1.1",
              [[-1, -0.65, -1, -0.65], [-0.2, 0.65, -0.2, 0.65]],
              _MJ + "table_tennis/table_tennis_utils.py CONTEXT_BOUNDS_4DIMS" + _FACTS.format("§1.1"),  # noqa: E501
-             _box, "thesis (goal y ±0.6); the code samples ±0.65"),
+             _box, "code (±0.65; settings=\"thesis\" gives B.4.1.1's ±0.6)"),
             *_TT,
         ],
     ),
@@ -212,7 +212,7 @@ TASK_SETTINGS: list[Setting] = [
              [[-1, -0.65, 1.5, -1, -0.6], [-0.2, 0.65, 4, -0.2, 0.6]], "B.4.1.2 (+ B.4.1.1)",
              [[-1, -0.65, 1.5, -1, -0.65], [-0.2, 0.65, 4, -0.2, 0.65]],
              _MJ + "table_tennis/table_tennis_utils.py CONTEXT_BOUNDS_5DIMS" + _FACTS.format("§1.2"),  # noqa: E501
-             _box, "thesis (goal y ±0.6); the code samples ±0.65"),
+             _box, "code (±0.65; settings=\"thesis\" gives B.4.1.1's ±0.6)"),
             *_TT,
         ],
     ),

@@ -55,8 +55,9 @@ to bat centre over all sub-steps), g = goal:
                                     + 1[x_land < 0]
     Interpretation: both thesis versions (A.3.3 cond. 3, B.4.1.1 cond. 4) say "table contact"
     for the landing case; the authors' code also scores a first *floor* contact after the hit
-    as a landing. The thesis is followed by default (a floor contact after the hit gets the
-    "no landing" term); ``floor_counts_as_landing=True`` gives the code's rule.
+    as a landing. The code made Figs. 4.3b and 4.4c, so its rule is the default
+    (``settings="code"``); ``settings="thesis"`` (or ``floor_counts_as_landing=False``)
+    gives a floor contact after the hit the "no landing" term.
 
 Success: the returned ball lands on the table at x < 0 (opponent's side) and
 ‖landing_xy - goal‖ < 0.2.
@@ -74,7 +75,7 @@ Path (:meth:`~vslbook.envs.robot.task.EpisodicTask.path`): ``ball`` (ball centre
 for a landing the ball's last point is the landing point of ``info``.
 
 Other places where the thesis was followed over the code or had to be interpreted
-    * Goal y ∈ [-0.6, 0.6] as in B.4.1.1 (the code samples ±0.65).
+    * Goal y ∈ [-0.65, 0.65], the code's range (``settings="thesis"``: B.4.1.1's ±0.6).
     * The episode stops at the sub-step of the terminating contact (the code finishes the
       control step's remaining sub-steps; only the recorded trajectories differ).
     * Out-of-range contexts (SVSL's punishment, B.4.1.1 and A.3.3): -20 d_c², d_c the distance
@@ -108,6 +109,10 @@ JOINT_HIGH = np.array([2.6, 2.0, 2.8, 3.1, 1.3, 1.6, 2.2])
 KP = 0.5 * np.array([1.0, 4.0, 2.0, 4.0, 1.0, 4.0, 1.0])
 KD = 0.1 * KP
 TAU_BOUNDS, DELAY_BOUNDS = (0.56, 1.5), (0.05, 0.6)
+#: Where the task's choices come from: the authors' environment (default) or the thesis.
+SETTINGS = ("code", "thesis")
+#: B.4.1.1's goal-y bound (the authors' code samples ±0.65)
+THESIS_GOAL_Y = 0.6
 BALL_Z0, BALL_VZ, BALL_VX_4D = 1.75, 0.5, 2.5
 GRAVITY, TABLE_HEIGHT, NET_HEIGHT, TABLE_X_END, TABLE_Y_HALF = 9.81, 0.77, 0.1, 1.1, 0.6
 UNSTABLE_RETURN = -25.0
@@ -232,8 +237,8 @@ class TableTennis4D(EpisodicTask):
 
     name: ClassVar[str] = "table-tennis-4d"
     context_names: ClassVar[tuple[str, ...]] = ("x_ball0", "y_ball0", "x_goal", "y_goal")
-    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, -1.0, -0.6])
-    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, -0.2, 0.6])
+    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, -1.0, -0.65])  # the code's
+    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, -0.2, 0.65])
     n_params: ClassVar[int] = SPEC.n_params
     info_keys: ClassVar[tuple[str, ...]] = (
         "hit", "landed", "landing_x", "landing_y", "landing_dist", "min_ball_racket_dist",
@@ -244,13 +249,24 @@ class TableTennis4D(EpisodicTask):
     spec: ClassVar[ProDMPSpec] = SPEC
 
     def __init__(
-        self, floor_counts_as_landing: bool = False, compiled: bool = True, **kwargs: Any
-    ) -> None:
-        super().__init__(
-            floor_counts_as_landing=floor_counts_as_landing, compiled=compiled, **kwargs
-        )
+        self, settings: str = "code", floor_counts_as_landing: bool | None = None,
+        compiled: bool = True, **kwargs: Any,
+    ) -> None:  # fmt: skip
+        super().__init__(settings=settings, floor_counts_as_landing=floor_counts_as_landing,
+                         compiled=compiled, **kwargs)  # fmt: skip
+        if settings not in SETTINGS:
+            raise ValueError(f"settings must be one of {SETTINGS}, got {settings!r}")
+        #: "code": the authors' goal range and landing rule; "thesis": B.4.1.1's
+        self.settings = settings
+        if floor_counts_as_landing is None:
+            floor_counts_as_landing = settings == "code"
         if not isinstance(floor_counts_as_landing, bool):
             raise TypeError("floor_counts_as_landing must be a bool")
+        if settings == "thesis":  # B.4.1.1: goal y in [-0.6, 0.6]
+            self.context_low = np.where(np.arange(self.context_dim) == self.context_dim - 1,
+                                        -THESIS_GOAL_Y, type(self).context_low)  # fmt: skip
+            self.context_high = np.where(np.arange(self.context_dim) == self.context_dim - 1,
+                                         THESIS_GOAL_Y, type(self).context_high)  # fmt: skip
         if not isinstance(compiled, bool):
             raise TypeError(f"compiled must be a bool, got {compiled!r}")
         self.floor_counts_as_landing = floor_counts_as_landing
@@ -480,8 +496,8 @@ class TableTennisHard(TableTennis4D):
 
     name: ClassVar[str] = "table-tennis-hard"
     context_names: ClassVar[tuple[str, ...]] = ("x_ball0", "y_ball0", "v_x", "x_goal", "y_goal")
-    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, 1.5, -1.0, -0.6])
-    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, 4.0, -0.2, 0.6])
+    context_low: ClassVar[np.ndarray] = np.array([-1.0, -0.65, 1.5, -1.0, -0.65])
+    context_high: ClassVar[np.ndarray] = np.array([-0.2, 0.65, 4.0, -0.2, 0.65])
 
     def serve(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         c = np.atleast_2d(np.asarray(context, dtype=np.float64))
