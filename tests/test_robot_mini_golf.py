@@ -125,7 +125,8 @@ def test_goal_gap_is_5_6_cm_centred_at_goal(task: MiniGolf, x_goal: float) -> No
 
 def test_context_sampler_ranges(task: MiniGolf) -> None:
     c = task.sample_contexts(3000, np.random.default_rng(0))
-    lo, hi = np.array([0.3, -0.5, 0.25, 0.25]), np.array([0.6, -0.1, 0.6, 0.6])
+    # the authors' box (x_goal in [0.18, 0.67]); B.4.4's with settings="thesis" below
+    lo, hi = np.array([0.3, -0.5, 0.25, 0.18]), np.array([0.6, -0.1, 0.6, 0.67])
     assert np.all((c >= lo) & (c <= hi))
     np.testing.assert_array_less(c.min(axis=0), lo + 0.01)
     np.testing.assert_array_less(hi - 0.01, c.max(axis=0))
@@ -135,8 +136,16 @@ def test_context_sampler_ranges(task: MiniGolf) -> None:
     again = task.sample_contexts(3000, np.random.default_rng(0))
     np.testing.assert_array_equal(c, again)
     # the authors' wider goal range is outside the thesis's context space
+    thesis = MiniGolf(settings="thesis")
+    assert thesis.reward == "thesis" and MiniGolf(settings="thesis", reward="code").reward == "code"
+    np.testing.assert_array_equal(thesis.context_low, [0.3, -0.5, 0.25, 0.25])
+    np.testing.assert_array_equal(thesis.context_high, [0.6, -0.1, 0.6, 0.6])
+    assert task.context_valid(np.array([0.4, -0.3, 0.4, 0.65]))
     with pytest.raises(ValueError, match="outside the task's context space"):
-        task.evaluate(np.zeros(29), [0.4, -0.3, 0.4, 0.65], workers=0)
+        thesis.evaluate(np.zeros(29), [0.4, -0.3, 0.4, 0.65], workers=0)
+    thesis.close()
+    with pytest.raises(ValueError, match=r"settings must be one of \('code', 'thesis'\), got 'x'"):
+        MiniGolf(settings="x")
 
 
 def test_invalid_theta_penalised_not_simulated(task: MiniGolf) -> None:

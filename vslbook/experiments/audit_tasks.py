@@ -310,7 +310,7 @@ TASK_SETTINGS: list[Setting] = [
              [[0.3, -0.5, 0.25, 0.25], [0.6, -0.1, 0.6, 0.6]], "B.4.4",
              [[0.3, -0.5, 0.25, 0.18], [0.6, -0.1, 0.6, 0.67]],
              _MJ + "mini_golf/mini_golf_env.py MiniGolfOneObsEnv" + _FACTS.format("§1.6"), _box,
-             "thesis (goal x [0.25, 0.6]); the code samples [0.18, 0.67]"),
+             "code (settings=\"thesis\" gives B.4.4's [0.25, 0.6])"),
             ("control dt (s)", NOT_STATED, "B.4.4 gives none", 0.02,
              _MJ + "mini_golf/mini_golf_env.py" + _FACTS.format("§1.6"), _mp("dt"), _CODE),
             ("horizon (control steps)", NOT_STATED, "B.4.4 gives none", 100,

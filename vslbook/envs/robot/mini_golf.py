@@ -9,9 +9,9 @@ size and contact parameter is listed).
 Context ``c = [x_obs, y_obs, x_ball, x_goal]`` (the authors' code's order): the moving
 (green) obstacle's position x_obs ∈ [0.3, 0.6], y_obs ∈ [−0.5, −0.1], the ball's start
 x_ball ∈ [0.25, 0.6] (it starts at (x_ball, 0.5, 0.005)) and the centre of the goal gap
-x_goal ∈ [0.25, 0.6] (B.4.4); uniform, no rejection. ⚠ The authors' code samples the goal
-from the wider range x_goal ∈ [0.18, 0.67] (the channel between the side walls spans
-x ∈ [0.155, 0.695]); the thesis's range is used here.
+x_goal ∈ [0.18, 0.67], the authors' range, which made Fig. 4.4d (the channel between the
+side walls spans x ∈ [0.155, 0.695]); uniform, no rejection. ``settings="thesis"`` takes
+B.4.4's x_goal ∈ [0.25, 0.6].
 
 Parameters θ (29, B.4.4): ``[τ, w (7 joints × 4 basis, joint-major)]``, a ProDMP
 (:class:`~vslbook.envs.robot.primitives.ProDMPSpec`) with learned duration τ ∈ [0.45, 1.7] s,
@@ -217,16 +217,20 @@ class MiniGolf(EpisodicTask):
     """Robot Mini Golf (MG): see the module docstring for every detail.
 
     Args:
-        reward: ``"code"`` (default: the authors' third case, which made Fig. 4.4d) or
-            ``"thesis"`` (B.4.4's printed third case); see the module docstring.
+        settings: ``"code"`` (default): the authors' environment, which made Fig. 4.4d (its
+            reward, x_goal ∈ [0.18, 0.67]); ``"thesis"``: B.4.4's reward and box
+            (x_goal ∈ [0.25, 0.6]).
+        reward: ``"code"`` or ``"thesis"`` (B.4.4's printed third case; see the module
+            docstring); None: the one of ``settings``.
         joint_limit_check: reject θ whose τ or q_d leave their bounds without simulating
             (False simulates every θ, τ clipped to its bounds).
     """
 
     name: ClassVar[str] = "mini-golf"
     context_names: ClassVar[tuple[str, ...]] = ("x_obstacle", "y_obstacle", "x_ball", "x_goal")
-    context_low: ClassVar[np.ndarray] = np.array([0.3, -0.5, 0.25, 0.25])
-    context_high: ClassVar[np.ndarray] = np.array([0.6, -0.1, 0.6, 0.6])
+    # the authors' box (MiniGolfOneObsEnv): x_goal in [0.18, 0.67]; B.4.4's is [0.25, 0.6]
+    context_low: ClassVar[np.ndarray] = np.array([0.3, -0.5, 0.25, 0.18])
+    context_high: ClassVar[np.ndarray] = np.array([0.6, -0.1, 0.6, 0.67])
     n_params: ClassVar[int] = SPEC.n_params
     info_keys: ClassVar[tuple[str, ...]] = (
         "hit", "passed", "min_rod_ball_dist", "min_ball_goal_dist", "min_ball_y", "unstable",
@@ -236,13 +240,21 @@ class MiniGolf(EpisodicTask):
     path_names: ClassVar[tuple[str, ...]] = ("ball", "club")
     mp: ClassVar[ProDMPSpec] = SPEC
 
-    def __init__(self, reward: str = "code", joint_limit_check: bool = True) -> None:
+    def __init__(
+        self, settings: str = "code", reward: str | None = None, joint_limit_check: bool = True
+    ) -> None:
+        if settings not in REWARD_VARIANTS:
+            raise ValueError(f"settings must be one of {REWARD_VARIANTS}, got {settings!r}")
+        reward = settings if reward is None else reward
         if reward not in REWARD_VARIANTS:
             raise ValueError(
                 f"reward must be one of {', '.join(map(repr, REWARD_VARIANTS))}, got {reward!r}"
             )
-        super().__init__(reward=reward, joint_limit_check=joint_limit_check)
-        self.reward = reward
+        super().__init__(settings=settings, reward=reward, joint_limit_check=joint_limit_check)
+        self.settings, self.reward = settings, reward
+        if settings == "thesis":  # B.4.4: x_goal in [0.25, 0.6]
+            self.context_low = np.array([0.3, -0.5, 0.25, 0.25])
+            self.context_high = np.array([0.6, -0.1, 0.6, 0.6])
         self.joint_limit_check = bool(joint_limit_check)
         self.model = build_model()
         self.data = mujoco.MjData(self.model)
