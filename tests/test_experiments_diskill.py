@@ -189,7 +189,8 @@ def test_chapter4_curves_from_the_command_line(tmp_path, monkeypatch):
     assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3  # Di-SkilL, BBRL, LinDi-SkilL
     fig = figures.draw_diskill_curves("4.4a", "smoke", tmp_path / "runs", progress=False)
     title = fig.axes[0].get_title()
-    assert "2 of 1400 iterations, 1 of 24 seeds, 2 of 3 experts, 4 of 80 samples" in title
+    assert "the authors' settings, budget smoke: 2 of 1400 iterations, 1 of 24 seeds, " \
+           "2 of 3 experts, 4 of 100 samples" in title  # HJ: the code's 100 samples (B.5: 80)
     plt.close(fig)
     with pytest.raises(ValueError, match="unknown figure '4.7'"):
         figures.draw_diskill_curves("4.7", "smoke", tmp_path / "runs")

@@ -287,8 +287,9 @@ def draw_diskill_curves(
         differs.append(f"{c['n_experts']} of {cfg.n_experts} experts")
     if "samples_per_expert" in c:
         differs.append(f"{c['samples_per_expert']} of {cfg.samples_per_expert} samples per expert")
-    ax.set_title(f"Fig. {figure}: {task} (ours, budget {b.name}: " + ", ".join(differs) + ")",
-                 fontsize=8, wrap=True)  # fmt: skip
+    source = "the authors' settings" if cfg.settings == "code" else "the thesis's settings"
+    ax.set_title(f"Fig. {figure}: {task} (ours, {source}, budget {b.name}: "
+                 + ", ".join(differs) + ")", fontsize=8, wrap=True)  # fmt: skip
     fig.tight_layout()
     return fig
 
