@@ -111,13 +111,9 @@ class RunDir(RunStatus):
     existing one for reading with :meth:`open`.
     """
 
-    CONFIG = "config.json"
-    ENV = "env.json"
-    METRICS = "metrics.jsonl"
+    CONFIG = "config.json"  # ENV, METRICS, DONE and FAILED: RunStatus
     CHECKPOINT_DIR = "checkpoint"
     CHECKPOINT = "state.pt"
-    DONE = "DONE"
-    FAILED = "FAILED"
 
     def __init__(self, path: str | os.PathLike[str]) -> None:
         self.path = Path(path)
@@ -398,10 +394,9 @@ class RunDir(RunStatus):
         loads); without one, every row: the run starts again from its seed. Only the
         process that holds the run's lock may call it (:func:`vslbook.run_open.open_run`).
         """
-        lines = self._metric_lines()
         if self.checkpoint_path.exists():
             return 0  # load_checkpoint truncates to the count saved in the checkpoint
-        raw = self.metrics_path.read_bytes() if self.metrics_path.exists() else b""
-        if raw:
+        dropped = len(self._metric_lines())
+        if self.metrics_path.exists() and self.metrics_path.stat().st_size:
             atomic_write(self.metrics_path, b"")
-        return len(lines)
+        return dropped

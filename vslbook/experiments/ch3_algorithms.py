@@ -40,7 +40,8 @@ from vslbook.erl.svsl_config import SVSLConfig
 from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir
 
-__all__ = ["EntropyProbe", "HiREPSRun", "LaDiPSRun", "PPORun", "SVSLRun", "env_of", "task_of"]
+__all__ = ["EntropyProbe", "HiREPSRun", "LaDiPSRun", "PPORun", "SVSLRun", "env_of", "task_counts",
+           "task_of"]
 
 #: Rewards of the Chapter 3 5-link reacher (Eqs. 3.8, 3.9, 3.10).
 REWARDS = ("3.8", "3.9", "3.10")
@@ -167,7 +168,8 @@ def task_of(env: str, table: dict[str, str]) -> str:
 # --------------------------------------------------------------------------------------
 # the configuration of each env at a budget (the Chapter 3 notebook's)
 # --------------------------------------------------------------------------------------
-def _counts(task: str, budget: Budget) -> dict[str, Any]:
+def task_counts(task: str, budget: Budget) -> dict[str, Any]:
+    """The counts of beer pong or Chapter 3 table tennis at ``budget`` (their ``*_counts``)."""
     from vslbook.experiments import svsl_beer_pong, svsl_table_tennis
 
     if task == "beer-pong":
@@ -187,7 +189,7 @@ def svsl_defaults(env: str, budget: Budget, overrides: dict[str, Any]) -> SVSLRu
         return _as(SVSLRun, svsl_reacher.reacher_configs(reward, budget)[0], reward=reward)
     if reward is not None:
         raise ValueError(f"reward= only applies to vslbook/Reacher5Ch3-v0, not {env}")
-    counts = _counts(task, budget)
+    counts = task_counts(task, budget)
     return _as(SVSLRun, svsl_mixtures.method_config(task, "SVSL", counts),
                **_entropy_fields(counts))  # fmt: skip
 
@@ -202,7 +204,7 @@ def _baseline_defaults(method: str, cls: type, envs: dict[str, str]):
             svsl = svsl_planar.variant_config("SVSL", budget)
             probe: dict[str, Any] = {}
         else:
-            counts = _counts(task, budget)
+            counts = task_counts(task, budget)
             config = svsl_mixtures.method_config(task, method, counts)
             svsl = svsl_mixtures.method_config(task, "SVSL", counts)
             probe = _entropy_fields(counts)

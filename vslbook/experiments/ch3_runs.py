@@ -17,7 +17,7 @@ and are not declared here yet.
 from __future__ import annotations
 
 from vslbook.budget import Budget, get_budget
-from vslbook.experiments.ch3_algorithms import env_of
+from vslbook.experiments.ch3_algorithms import env_of, task_counts
 from vslbook.experiments.run_plan import FigureRun
 from vslbook.experiments.svsl_context import METHODS
 
@@ -28,14 +28,6 @@ FIGURE_TASKS = {"fig3-2": ("beer-pong", "table-tennis-ch3")}
 #: figure → the metric its claim is about (Fig. 3.2e/f: success over the context grid; the
 #: runs' test success on contexts from p(c) is the recorded summary of it)
 METRIC = {"fig3-2": "test_success"}
-
-
-def _counts(task: str, budget: Budget) -> dict:
-    from vslbook.experiments import svsl_beer_pong, svsl_table_tennis
-
-    if task == "beer-pong":
-        return svsl_beer_pong.beer_pong_counts(budget)
-    return svsl_table_tennis.table_tennis_counts(budget)
 
 
 def figure_runs(figure: str, budget: Budget | str | None = None) -> list[FigureRun]:
@@ -55,5 +47,5 @@ def figure_runs(figure: str, budget: Budget | str | None = None) -> list[FigureR
             config = get_algorithm(algo).default_config(env, b, {})
             length = getattr(config, "total_iterations", None) or config.iterations
             runs += [FigureRun(figure, method, algo, env, seed, b.name, length)
-                     for seed in range(_counts(task, b)["seeds"])]  # fmt: skip
+                     for seed in range(task_counts(task, b)["seeds"])]  # fmt: skip
     return runs
