@@ -25,7 +25,7 @@ FIGURE, BUDGET = "fig4-4a", "smoke"
 FILES = ("runs.csv", "evals.csv.gz", "provenance.json", "registry.json")
 PROVENANCE_KEYS = {
     "method", "algo", "env", "seed", "budget", "config", "config_hash", "code_hash",
-    "code_excluded", "git_sha", "git_dirty", "packages", "hostname", "python", "platform",
+    "code_hashes_verified", "code_excluded", "git_sha", "git_dirty", "packages", "hostname", "python", "platform",
     "started", "wall_seconds", "wall_from", "metrics", "recorded",
 }  # fmt: skip
 RESULT_KEYS = {"figure", "method", "task", "budget", "seeds", "metric", "iqm", "ci_low",
@@ -276,3 +276,42 @@ def test_recorded_tables_read_back_exactly(root, capsys):
     frame = pd.read_csv(io.BytesIO(data), float_precision="round_trip")
     again = frame.to_csv(index=False, lineterminator="\n").encode()
     assert again == data
+
+
+def _rewrite(path: Path, data: bytes) -> None:
+    """Write a recorded table by hand and register it again (as a damaged set would not)."""
+    registry = json.loads((path.parent / "registry.json").read_text())
+    path.write_bytes(data)
+    register_file(path, registry[path.name]["description"])
+
+
+def test_verify_replays_changed_runs_and_keeps_equal_ones_current(root, capsys):
+    """``results --verify``: a run whose recorded fingerprint differs from today's is
+    replayed; equal first rows make it current again (today's fingerprint joins its
+    provenance), a recorded number the replay does not give keeps it stale."""
+    runs = figure_runs(FIGURE, BUDGET)
+    _record(root, capsys)
+    directory = recorded_dir(FIGURE, BUDGET)
+    provenance = json.loads((directory / "provenance.json").read_text())
+    for r in runs[:2]:
+        provenance["runs"][r.name]["code_hash"] = "f" * 64
+    _rewrite(directory / "provenance.json",
+             (json.dumps(provenance, indent=2, sort_keys=True) + "\n").encode())
+    # the second run's first recorded test_return is not what its code computes
+    evals = pd.read_csv(directory / "evals.csv.gz")
+    first = evals[(evals["run"] == runs[1].name) & (evals["metric"] == "test_return")].index[0]
+    evals.loc[first, "value"] += 1.0
+    _rewrite(directory / "evals.csv.gz",
+             gzip.compress(evals.to_csv(index=False, lineterminator="\n").encode(), mtime=0))
+    assert [r["stale"] for r in _results(capsys)] == [True, True, False]
+
+    capsys.readouterr()
+    assert main(["results", "--verify"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    states = {line.split()[3]: line.split()[0] for line in lines[:3]}
+    assert states == {runs[0].name: "verified", runs[1].name: "stale", runs[2].name: "current"}
+    assert "test_return" in next(line for line in lines if runs[1].name in line)
+    assert lines[3] == "1 current, 1 verified, 1 stale"
+    assert [r["stale"] for r in _results(capsys)] == [False, True, False]
+    kept = json.loads((directory / "provenance.json").read_text())["runs"][runs[0].name]
+    assert kept["code_hash"] == "f" * 64 and len(kept["code_hashes_verified"]) == 1

@@ -11,7 +11,7 @@
     vslbook figure ID [--budget B] [--out DIR]
     vslbook plan FIGURE [--budget B] [--root DIR]   what a figure's runs need, core-hours left
     vslbook record FIGURE [--budget B] [--root DIR] a figure's finished runs into data/results/
-    vslbook results [--json]                 recorded run sets: final IQM, 95 % CI, stale
+    vslbook results [--json] [--verify]      recorded run sets: final IQM, 95 % CI, stale
 """
 
 from __future__ import annotations
@@ -173,6 +173,9 @@ def _parser() -> argparse.ArgumentParser:
         "and whether the code the runs can reach has changed since (stale).",
     )  # fmt: skip
     res.add_argument("--json", action="store_true", help="one JSON object per line")
+    res.add_argument("--verify", action="store_true",
+                     help="replay the first rows of every recorded run whose code has changed "
+                     "and compare them with the record: equal rows keep it current")  # fmt: skip
 
     f = sub.add_parser("figure", help="reproduce a registered figure")
     f.add_argument("id")
@@ -304,6 +307,10 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "results":
         from vslbook.experiments.record import result_rows, results_text
 
+        if args.verify:
+            from vslbook.experiments.record_verify import verify_recorded, verify_text
+
+            print(verify_text(verify_recorded(progress=not args.json)))
         rows = result_rows()
         if args.json:
             for row in rows:

@@ -25,7 +25,8 @@ import tempfile
 from collections.abc import Mapping
 from typing import Any
 
-__all__ = ["ATOL", "REPLAY_ROWS", "RTOL", "WALL_CLOCK", "replay_matches", "rows_match"]
+__all__ = ["ATOL", "REPLAY_ROWS", "RTOL", "WALL_CLOCK", "numeric_row", "replay_matches",
+           "rows_match"]
 
 #: rows compared (or fewer, when the run has fewer)
 REPLAY_ROWS = 2
@@ -55,8 +56,15 @@ def rows_match(old: list[Mapping[str, Any]], new: list[Mapping[str, Any]]) -> st
     return None
 
 
+def numeric_row(row: Mapping[str, Any]) -> dict[str, Any]:
+    """``row`` reduced to what a recorded table keeps (:func:`vslbook.data.evals_frame`):
+    ``step`` and the numeric metrics (ints, floats and ``None``; not booleans)."""
+    return {k: v for k, v in row.items() if k == "step" or v is None
+            or (isinstance(v, (int, float)) and not isinstance(v, bool))}  # fmt: skip
+
+
 def replay_matches(spec: Any, record: Mapping[str, Any], rows: list[Mapping[str, Any]],
-                   budget: Any) -> str | None:  # fmt: skip
+                   budget: Any, *, numeric_only: bool = False) -> str | None:  # fmt: skip
     """Train ``record``'s first :data:`REPLAY_ROWS` rows with today's code and compare them
     with ``rows`` (the run's own); None when they match, else why not.
 
@@ -65,6 +73,8 @@ def replay_matches(spec: Any, record: Mapping[str, Any], rows: list[Mapping[str,
         record: the run's ``config.json``.
         rows: the run's logged rows.
         budget: the run's :class:`vslbook.budget.Budget`.
+        numeric_only: compare only the numeric metrics (:func:`numeric_row`): ``rows``
+            come from a recorded table, which keeps no others.
     """
     from vslbook.results import DivergenceError, RunDir
 
@@ -80,5 +90,6 @@ def replay_matches(spec: Any, record: Mapping[str, Any], rows: list[Mapping[str,
                 return f"the replay diverged ({err})"
             got = rd.metrics()
             if done is not None or len(got) >= len(want):
-                return rows_match(want, got[: len(want)])
+                got = got[: len(want)]
+                return rows_match(want, [numeric_row(r) for r in got] if numeric_only else got)
     return "the replay did not reach the rows to compare"

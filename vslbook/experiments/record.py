@@ -58,8 +58,9 @@ from vslbook.provenance import code_fingerprint
 from vslbook.results import RunDir, RunDirError
 
 __all__ = [
-    "RUNS_COLUMNS", "RecordReport", "figure_metric", "load_recorded", "record", "record_text",
-    "recorded_dir", "recorded_names", "result_rows", "results_text",
+    "PROVENANCE", "RUNS_COLUMNS", "RecordReport", "entry_stale", "figure_metric",
+    "load_recorded", "read_set", "record", "record_text", "recorded_dir", "recorded_names",
+    "result_rows", "results_text", "write_provenance",
 ]  # fmt: skip
 
 #: columns of a recorded set's ``runs.csv``
@@ -125,7 +126,7 @@ def _read_csv(directory: Path, name: str, dtype: dict[str, Any]) -> pd.DataFrame
                        na_values=[""])  # fmt: skip
 
 
-def _read_set(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
+def read_set(directory: Path) -> tuple[pd.DataFrame, pd.DataFrame, dict[str, Any]]:
     """(runs, evals, provenance) of a recorded set; empty ones where nothing is recorded."""
     if not (directory / "runs.csv").exists():
         empty_runs = pd.DataFrame(columns=RUNS_COLUMNS)
@@ -145,7 +146,7 @@ def recorded_names(figure: str, budget: Budget | str | None = None) -> set[str]:
     directory = recorded_dir(figure, budget)
     if not (directory / "runs.csv").exists():
         return set()
-    return set(_read_set(directory)[0]["run"])
+    return set(read_set(directory)[0]["run"])
 
 
 def load_recorded(figure: str, budget: Budget | str | None = None) -> dict[str, list[pd.DataFrame]]:
@@ -156,7 +157,7 @@ def load_recorded(figure: str, budget: Budget | str | None = None) -> dict[str, 
     Methods come in the figure's order. Raises ``ValueError`` when nothing is recorded.
     """
     directory = recorded_dir(figure, budget)
-    runs, evals, _ = _read_set(directory)
+    runs, evals, _ = read_set(directory)
     if runs.empty:
         raise ValueError(f"no runs of {figure} recorded in {directory}; record them with "
                          f"vslbook record {figure} --budget {get_budget(budget).name}")  # fmt: skip
@@ -232,6 +233,7 @@ def _provenance(rd: RunDir, run: Any, earlier: dict[str, Any] | None) -> dict[st
         "method": run.method, "algo": run.algo, "env": run.env,
         "seed": config.get("seed"), "budget": config.get("budget"), "config": config,
         "config_hash": rd.config_hash, "code_hash": env.get("code_hash"),
+        "code_hashes_verified": list(env.get("code_hashes_verified", ())),
         "code_excluded": env.get("code_excluded", []), "git_sha": env.get("git_sha"),
         "git_dirty": env.get("git_dirty"), "packages": env.get("packages"),
         "hostname": env.get("hostname"), "python": env.get("python"),
@@ -266,7 +268,7 @@ def record(figure: str, budget: Budget | str | None = None,
         raise ValueError(f"root {str(root)!r} is not a folder; expected the folder that holds "
                          "the run directories (vslbook run --root)")  # fmt: skip
     out = recorded_dir(figure, b)
-    old_runs, old_evals, old_prov = _read_set(out)
+    old_runs, old_evals, old_prov = read_set(out)
     report = RecordReport(figure, b.name, root, out, [r.name for r in runs])
     fresh: dict[str, tuple[RunDir, Any]] = {}
     for run in runs:
@@ -301,12 +303,18 @@ def record(figure: str, budget: Budget | str | None = None,
         {"run": str, "step": "int64", "metric": str, "value": "float64"})  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
     body = {"figure": figure, "budget": b.name, "runs": {n: provenance[n] for n in names}}
-    files = {"runs.csv": csv_bytes(runs_frame), "evals.csv.gz": gzip_bytes(csv_bytes(evals)),
-             PROVENANCE: json_bytes(body)}  # fmt: skip
+    files = {"runs.csv": csv_bytes(runs_frame), "evals.csv.gz": gzip_bytes(csv_bytes(evals))}
     for name, data in files.items():
         atomic_write(out / name, data)
         register_file(out / name, _DESCRIPTIONS[name])
+    write_provenance(out, body)
     return report
+
+
+def write_provenance(directory: Path, body: dict[str, Any]) -> None:
+    """Write a set's ``provenance.json`` and register its sha256."""
+    atomic_write(directory / PROVENANCE, json_bytes(body))
+    register_file(directory / PROVENANCE, _DESCRIPTIONS[PROVENANCE])
 
 
 def record_text(report: RecordReport) -> str:
@@ -335,10 +343,12 @@ def record_text(report: RecordReport) -> str:
 # --------------------------------------------------------------------------- results
 
 
-def _stale(entry: dict[str, Any]) -> bool:
-    """True when the code the run can reach now is not the code that made it."""
-    excluded = tuple(entry.get("code_excluded") or ())
-    return entry.get("code_hash") != code_fingerprint(excluded)
+def entry_stale(entry: dict[str, Any]) -> bool:
+    """True when the code the run can reach now is neither the code that made it nor code
+    that replayed its first rows identically (``code_hashes_verified``, written by
+    ``vslbook run`` on resume or by ``vslbook results --verify``)."""
+    now = code_fingerprint(tuple(entry.get("code_excluded") or ()))
+    return now != entry.get("code_hash") and now not in entry.get("code_hashes_verified", ())
 
 
 def _number(value: float) -> float | None:
@@ -364,7 +374,7 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
             directory = recorded_dir(figure, b)
             if not (directory / "runs.csv").exists():
                 continue
-            runs, evals, provenance = _read_set(directory)
+            runs, evals, provenance = read_set(directory)
             finals = evals[(evals["metric"] == metric) & evals["value"].notna()]
             finals = finals.sort_values(["run", "step"], kind="stable").groupby("run").last()
             order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
@@ -386,7 +396,7 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
                     "figure": figure, "method": method, "task": task, "budget": b.name,
                     "seeds": len(values), "metric": metric, "iqm": _number(iqm),
                     "ci_low": _number(low), "ci_high": _number(high),
-                    "stale": any(_stale(provenance.get(n, {})) for n in names),
+                    "stale": any(entry_stale(provenance.get(n, {})) for n in names),
                 })  # fmt: skip
     return rows
 
