@@ -175,26 +175,47 @@ def test_recording_is_deterministic_and_merges(root, capsys, tmp_path):
         assert not monkey.exists()
 
 
+def _other_code(run_dir: Path) -> None:
+    env = json.loads((run_dir / "env.json").read_text())
+    env["code_hash"] = "0" * 64
+    (run_dir / "env.json").write_text(json.dumps(env))
+
+
 def test_unusable_runs_are_listed_and_not_recorded(root, capsys):
     partial, failed, stale = figure_runs(FIGURE, BUDGET)
     (root / partial.name / "DONE").unlink()
     RunDir.open(root / failed.name).mark_failed({"message": "diverged at step 1: non-finite x"})
-    env = json.loads((root / stale.name / "env.json").read_text())
-    env["code_hash"] = "0" * 64
-    (root / stale.name / "env.json").write_text(json.dumps(env))
+    # made by other code, and its first row is not what today's code computes
+    path = root / stale.name / "metrics.jsonl"
+    rows = [json.loads(line) for line in path.read_text().splitlines()]
+    rows[0]["test_return"] += 1.0
+    path.write_text("".join(json.dumps(r) + "\n" for r in rows))
+    (root / stale.name / "DONE").unlink()
+    RunDir.open(root / stale.name).mark_done({})
+    _other_code(root / stale.name)
     out = _record(root, capsys)
-    assert out == [
+    assert out[:2] == [
         f"not recorded  partial  {partial.name}  (2/2 step)",
         f"not recorded  failed   {failed.name}  (diverged at step 1: non-finite x)",
-        f"not recorded  stale    {stale.name}  (made by other code)",
-        f"0 of 3 runs of {FIGURE} at {BUDGET} recorded (nothing written)",
     ]
+    assert out[2].startswith(f"not recorded  stale    {stale.name}  (made by other code; "
+                             "replay: row 1, test_return: ")  # fmt: skip
+    assert out[3] == f"0 of 3 runs of {FIGURE} at {BUDGET} recorded (nothing written)"
     assert not recorded_dir(FIGURE, BUDGET).exists()
     (root / failed.name / "FAILED").unlink()
     with open(root / failed.name / "metrics.jsonl", "a") as fh:
         fh.write('{"step": 3}\n')  # appended after DONE: DONE no longer covers the file
     out = _record(root, capsys)
     assert f"not recorded  damaged  {failed.name}  (its DONE does not match metrics.jsonl)" in out
+
+
+def test_a_run_made_by_other_code_is_recorded_when_it_replays_equal(root, capsys):
+    run = figure_runs(FIGURE, BUDGET)[0]
+    _other_code(root / run.name)
+    assert not RunDir(root / run.name).code_matches
+    assert f"recorded      {run.name}" in _record(root, capsys)
+    assert RunDir(root / run.name).code_matches  # today's fingerprint joined its env.json
+    assert not [r for r in _results(capsys) if r["method"] == run.method][0]["stale"]
 
 
 def test_results_lists_each_set_with_its_final_iqm(root, capsys):

@@ -3,6 +3,8 @@ plan`` lists, for every registered figure and budget, and ``plan`` reads a root'
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from vslbook.cli import main
@@ -53,3 +55,12 @@ def test_plan_reads_the_state_of_each_run(tmp_path, monkeypatch):
                                           "them)")  # fmt: skip
     with pytest.raises(ValueError, match="figure 'fig9-9' declares no runs; expected one of"):
         figure_runs("fig9-9")
+    # made by other code: its state and progress stand, with a note (a replay decides)
+    env_path = tmp_path / first.name / "env.json"
+    env = json.loads(env_path.read_text())
+    env["code_hash"] = "0" * 64
+    env_path.write_text(json.dumps(env))
+    row = plan("fig4-4a", "smoke", tmp_path)[0]
+    assert (row.state, row.progress) == ("done", first.length)
+    assert plan_text([row]).splitlines()[0] == (
+        f"done     {first.name} (code changed: replayed when resumed or recorded)")

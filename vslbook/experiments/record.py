@@ -17,8 +17,9 @@
     a damaged or hand-edited table is an error, never a silently wrong plot.
 
 Only runs that are ``DONE``, whose metrics match what ``DONE`` recorded
-(:meth:`~vslbook.results.RunDir.check_done`) and that the current code made
-(:attr:`~vslbook.results.RunDir.code_matches`) are recorded. A set grows across machines
+(:meth:`~vslbook.results.RunDir.check_done`) and that the current code made or reproduces
+(:attr:`~vslbook.results.RunDir.code_matches`; a run made by other code is replayed first,
+:mod:`vslbook.replay`) are recorded. A set grows across machines
 and sessions: recording again merges with what the folder holds (the root's copy of a run
 wins) and rewrites the tables deterministically; recording the same runs twice gives the
 same bytes.
@@ -194,7 +195,12 @@ class RecordReport:
 
 
 def _state(rd: RunDir, length: int, unit: str) -> tuple[str, str]:
-    """(state, detail) of a run directory; state ``ok`` means it can be recorded."""
+    """(state, detail) of a run directory; state ``ok`` means it can be recorded.
+
+    A finished run made by other code is replayed (:mod:`vslbook.replay`, under its lock):
+    equal first rows keep it current (today's fingerprint joins its ``env.json``), other
+    numbers make it ``stale``.
+    """
     if not (rd.path / RunDir.CONFIG).is_file():
         return "missing", ""
     if rd.failed:
@@ -207,8 +213,33 @@ def _state(rd: RunDir, length: int, unit: str) -> tuple[str, str]:
     except RunDirError:
         return "damaged", "its DONE does not match metrics.jsonl"
     if not rd.code_matches:
-        return "stale", "made by other code"
+        why = _replay(rd)
+        if why is not None:
+            return "stale", f"made by other code; replay: {why}"
     return "ok", ""
+
+
+def _replay(rd: RunDir) -> str | None:
+    """None when today's code replays ``rd``'s first rows (and that is now recorded in
+    its ``env.json``), else why not."""
+    from vslbook.registry import get_algorithm, load_plugins
+    from vslbook.replay import replay_matches
+    from vslbook.run_lock import RunLock, RunLockedError
+
+    load_plugins()
+    config = rd.config
+    try:
+        lock = RunLock(rd.path).acquire()
+    except RunLockedError as err:
+        return f"not checked: {err}"
+    try:
+        why = replay_matches(get_algorithm(config["algo"]), config, rd.metrics(),
+                             get_budget(config["budget"]))  # fmt: skip
+        if why is None:
+            rd.add_verified_code()
+        return why
+    finally:
+        lock.release()
 
 
 def _wall_time(rd: RunDir, rows: list[dict[str, Any]], env: dict[str, Any]) -> tuple[float, str]:

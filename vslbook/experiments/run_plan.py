@@ -5,17 +5,20 @@ as :class:`FigureRun` values (algorithm, env, seed, the config overrides, how lo
 is): :func:`figure_runs` collects them. Everything that trains or reads a figure's runs
 uses this one declaration:
 
-* ``vslbook run ALGO --env ENV --seed S --budget B`` trains the run a figure uses at ``B``
-  (a figure's runs carry no overrides the command line would not apply itself), so
-  ``vslbook run ... --dry-run`` prints the names :func:`plan` lists;
+* ``vslbook run ALGO --env ENV --seed S --budget B [--set k=v ...]`` trains the run a
+  figure uses at ``B`` (a run's ``overrides`` are its ``--set`` pairs, e.g. Fig. 3.1's
+  ``responsibilities=false``), so ``vslbook run ... --dry-run`` prints the names
+  :func:`plan` lists;
 * the notebooks and ``vslbook figure`` train (or reuse) them with :meth:`FigureRun.train`;
 * :func:`plan` (``vslbook plan FIGURE``) says for each run whether it is ``done``,
-  ``partial`` (and how far), ``missing``, ``stale`` (made by other code) or ``recorded``
-  (in ``data/results/``), and estimates the core-hours left from the per-iteration times
+  ``partial`` (and how far), ``missing``, ``failed`` or ``recorded`` (in
+  ``data/results/``), noting a run made by other code (``code changed``: it is stale only
+  if replaying its first rows gives other numbers, which ``vslbook run`` and ``vslbook
+  record`` check before they use it, moving a stale run to ``_stale/``), and estimates the core-hours left from the per-iteration times
   the runs in the root measured.
 
-Chapters registered here: 3 (Fig. 3.2, :mod:`vslbook.experiments.ch3_runs`) and 4
-(:mod:`vslbook.experiments.diskill_runs`).
+Chapters registered here: 3 (Figs. 3.1, 3.2, 3.5, :mod:`vslbook.experiments.ch3_runs`) and
+4 (:mod:`vslbook.experiments.diskill_runs`).
 """
 
 from __future__ import annotations
@@ -34,7 +37,7 @@ __all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "pla
 
 #: figure id → the chapter module whose ``figure_runs(figure, budget)`` declares its runs
 FIGURE_MODULES: dict[str, str] = {
-    "fig3-2": "vslbook.experiments.ch3_runs",
+    **{f"fig3-{n}": "vslbook.experiments.ch3_runs" for n in ("1", "2", "5")},
     **{f"fig4-{n}": "vslbook.experiments.diskill_runs"
        for n in ("3b", "3c", "4a", "4b", "4c", "4d")},
 }  # fmt: skip
@@ -50,8 +53,8 @@ class FigureRun:
         algo, env, seed, budget: what ``vslbook run`` takes.
         length: the run's length in ``unit``.
         unit: the metrics column that counts progress (``step`` or e.g. ``env_steps``).
-        overrides: config fields set beside the budget's preset (empty for a figure whose
-            preset is the command line's).
+        overrides: config fields set beside the budget's preset, as ``vslbook run --set``
+            strings (empty where the preset is the run).
     """
 
     figure: str
@@ -112,9 +115,10 @@ class PlanRow:
     """One run of a plan: its state, progress and estimated core-hours left."""
 
     run: FigureRun
-    state: str  # done | partial | missing | stale | recorded | failed
+    state: str  # done | partial | missing | recorded | failed
     progress: int = 0  # units done (``run.unit``)
     seconds_per_unit: float = math.nan  # measured by this run, or its method's others
+    note: str = ""  # e.g. that the code changed since the run was made
 
     @property
     def hours_left(self) -> float:
@@ -123,21 +127,25 @@ class PlanRow:
         return (self.run.length - self.progress) * self.seconds_per_unit / 3600.0
 
 
-def _state(path: Path, unit: str) -> tuple[str, int, list[float]]:
-    """(state, progress, per-unit seconds measured) of the run directory ``path``."""
+def _state(path: Path, unit: str) -> tuple[str, int, list[float], str]:
+    """(state, progress, per-unit seconds measured, note) of the run directory ``path``.
+
+    A run made by code other than today's keeps its state with the note ``code changed``:
+    whether it is stale is decided by replaying its first rows (:mod:`vslbook.replay`)
+    when it is resumed, reused or recorded, not here.
+    """
     from vslbook.results import RunDir
 
     if not (path / RunDir.CONFIG).is_file():
-        return "missing", 0, []
+        return "missing", 0, [], ""
     rd = RunDir(path)
     rows = rd.metrics()
     progress = int(rows[-1].get(unit, 0) or 0) if rows else 0
     times = [r["iteration_seconds"] for r in rows if r.get("iteration_seconds") is not None]
+    note = "" if rd.code_matches else "code changed: replayed when resumed or recorded"
     if rd.failed:
-        return "failed", progress, times
-    if not rd.code_matches:
-        return "stale", progress, times
-    return ("done" if rd.done else "partial"), progress, times
+        return "failed", progress, times, note
+    return ("done" if rd.done else "partial"), progress, times, note
 
 
 def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "runs",
@@ -151,17 +159,15 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
     runs = figure_runs(figure, budget)
     states = [_state(Path(root) / r.name, r.unit) for r in runs]
     by_method: dict[tuple[str, str], list[float]] = {}
-    for r, (_, _, times) in zip(runs, states, strict=True):
+    for r, (_, _, times, _) in zip(runs, states, strict=True):
         by_method.setdefault((r.algo, r.env), []).extend(times)
     rows = []
-    for r, (state, progress, times) in zip(runs, states, strict=True):
+    for r, (state, progress, times, note) in zip(runs, states, strict=True):
         if state == "missing" and recorded is not None and recorded(r):
             state = "recorded"
-        if state == "stale":  # trained afresh when run again
-            progress = 0
         pool = times or by_method[(r.algo, r.env)]
         per = statistics.median(pool) if pool and r.unit == "step" else math.nan
-        rows.append(PlanRow(r, state, progress, per))
+        rows.append(PlanRow(r, state, progress, per, note))
     return rows
 
 
@@ -170,10 +176,11 @@ def plan_text(rows: list[PlanRow]) -> str:
     core-hours left (one core per run) and how many runs have no time measured yet."""
     lines = []
     for row in rows:
-        partial = row.state == "partial"
-        extra = f" ({row.progress}/{row.run.length} {row.run.unit})" if partial else ""
+        notes = [f"{row.progress}/{row.run.length} {row.run.unit}"] if row.state == "partial" else []
+        notes += [row.note] if row.note else []
+        extra = f" ({'; '.join(notes)})" if notes else ""
         lines.append(f"{row.state:8s} {row.run.name}{extra}")
-    todo = [r for r in rows if r.state in ("partial", "missing", "stale")]
+    todo = [r for r in rows if r.state in ("partial", "missing")]
     known = [r.hours_left for r in todo if not math.isnan(r.hours_left)]
     unknown = len(todo) - len(known)
     total = f"{sum(known):.1f} core-hours left for {len(known)} runs"
