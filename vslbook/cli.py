@@ -10,6 +10,7 @@
                   [--executor debug|local|slurm] [--slurm slurm.yaml] [--no-wait]
     vslbook figure ID [--budget B] [--out DIR]
     vslbook plan FIGURE [--budget B] [--root DIR]   what a figure's runs need, core-hours left
+    vslbook train FIGURE [--budget B] [--seeds ..] [--jobs N]  a figure's runs, N at once
     vslbook record FIGURE [--budget B] [--root DIR] a figure's finished runs into data/results/
     vslbook results [--json] [--verify]      recorded run sets: final IQM, 95 % CI, stale
 """
@@ -157,6 +158,23 @@ def _parser() -> argparse.ArgumentParser:
     pl.add_argument("--budget", default=None)
     pl.add_argument("--root", default="runs", help="folder of run directories")
 
+    tr = sub.add_parser(
+        "train", help="train a figure's runs, one per process (finished ones are reused)",
+        description="Train the runs FIGURE draws at BUDGET (those `vslbook plan` lists), "
+        "optionally only some seeds, methods or envs, with JOBS processes of one thread "
+        "each. Finished runs are reused, partial ones resume, runs another process holds "
+        "are skipped.",
+    )  # fmt: skip
+    tr.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
+    tr.add_argument("--budget", default=None)
+    tr.add_argument("--root", default="runs", help="folder for run directories")
+    tr.add_argument("--seeds", type=_seed, nargs="+", default=None)
+    tr.add_argument("--methods", nargs="+", default=None, help="legend names, e.g. SVSL")
+    tr.add_argument("--envs", nargs="+", default=None, help="environment ids")
+    tr.add_argument("--jobs", type=int, default=1, help="processes (one run each)")
+    tr.add_argument("--dry-run", action="store_true",
+                    help="print the runs it would train, in order; train nothing")  # fmt: skip
+
     rec = sub.add_parser(
         "record", help="export a figure's finished runs into data/results/FIGURE/BUDGET/",
         description="Write runs.csv, evals.csv.gz, provenance.json and registry.json for the "
@@ -300,6 +318,18 @@ def _dispatch(args: argparse.Namespace) -> int:
         rows = plan(args.figure, args.budget, args.root, recorded=lambda r: r.name in names)
         print(plan_text(rows))
         return 0
+    if args.command == "train":
+        from vslbook.experiments.train_figure import select_runs, train_figure
+
+        runs = select_runs(args.figure, args.budget, seeds=args.seeds, methods=args.methods,
+                           envs=args.envs)  # fmt: skip
+        if args.dry_run:
+            for run in runs:
+                print(run.name)
+            return 0
+        results = train_figure(runs, args.root, args.jobs,
+                               report=lambda line: print(line, flush=True))  # fmt: skip
+        return 0 if all(r.state == "done" for r in results) else 1
     if args.command == "record":
         from vslbook.experiments.record import record, record_text
 
