@@ -40,6 +40,31 @@ def test_ours_follows_the_task_options() -> None:
     assert _row(bpo, "box-pushing-obstacle", "parameters θ")["ours = code"] is True
 
 
+def test_box_pushing_follows_the_code_and_the_thesis_settings_the_text() -> None:
+    """Every box-pushing row agrees with the authors' code by default; settings="thesis"
+    agrees with B.4.2.1 on every row where the thesis states a value."""
+    rows = audit.task_audit()
+    bpo = rows[rows["subject"] == "box-pushing-obstacle"]
+    assert bpo["ours = code"].tolist() == [True] * len(bpo), bpo[["field", "ours"]]
+    fields = set(bpo["field"])
+    for field in ("obstacle–goal distance rule", "goal mode", "parameters θ",
+                  "reward: weight of box–rod distance, of ‖q̇_T‖",
+                  "reward: rod tilt cost per step below π/4",
+                  "θ outside joint limits rejected unsimulated"):  # fmt: skip
+        assert field in fields
+        assert _row(rows, "box-pushing-obstacle", field)["choice and why"].startswith("code")
+    thesis = audit.task_audit({"box-pushing-obstacle": {"settings": "thesis"}})
+    tb = thesis[thesis["subject"] == "box-pushing-obstacle"]
+    stated = tb[tb["ours = thesis"].notna()]
+    assert stated["ours = thesis"].tolist() == [True] * len(stated), stated[["field", "ours"]]
+    assert _row(thesis, "box-pushing-obstacle", "parameters θ")["ours"] == "28"
+    assert _row(thesis, "box-pushing-obstacle", "obstacle–goal distance rule")["ours"] == (
+        "Euclidean distance >= 0.15"
+    )
+    limits = _row(thesis, "box-pushing-obstacle", "θ outside joint limits rejected unsimulated")
+    assert (limits["ours"], limits["ours = code"]) == ("True", False)
+
+
 def test_ours_follows_the_configs() -> None:
     field = "samples per expert"
     before = _row(audit.algorithm_audit(4), "diskill/hopper-jump", field)  # the code's preset

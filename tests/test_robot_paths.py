@@ -139,8 +139,12 @@ def test_box_path_starts_at_the_box_and_ends_at_the_reported_error():
     assert np.linalg.norm(box[-1, :2] - box[0, :2]) > 0.4  # it was pushed across the table
     m, d = task.scene(BPO_CONTEXT)
     np.testing.assert_allclose(p["rod_tip"][0], d.site_xpos[m.site("rod_tip").id], atol=1e-12)
+    # the code (default) simulates every θ; the thesis settings reject one far outside the
+    # joint limits before simulating it, so it has no path
+    assert BPO_THETA.shape == (35,)
+    thesis = make_task("box-pushing-obstacle", settings="thesis")
     with pytest.raises(ValueError, match="rejected before simulation"):
-        task.path(np.full(28, 40.0), BPO_CONTEXT)  # far outside the joint limits
+        thesis.path(np.full(28, 40.0), BPO_CONTEXT)
 
 
 # -- reachers -----------------------------------------------------------------------------------

@@ -11,17 +11,15 @@ from gymnasium.utils.env_checker import check_env
 
 from vslbook.envs.robot.box_pushing import BoxPushingObstacle
 from vslbook.envs.robot.box_pushing_step import BoxPushingObstacleStepEnv
+from vslbook.envs.robot.examples import EXAMPLES, THESIS_EXAMPLES
 from vslbook.envs.robot.reacher5 import Reacher5
 from vslbook.envs.robot.reacher5_sparse_step import Reacher5SparseStepEnv
 
-# The succeeding (context, θ) pair of tests/test_robot_box_pushing.py.
-CTX = np.array([0.35, -0.2, math.pi, 0.58, 0.05])
-THETA_OK = np.array([
-    0.432, -0.4569, -1.3418, -1.1043, 0.1331, -1.1854, -0.6359,
-    -0.5922, 0.2453, -0.6642, -1.2187, -1.8743, -0.5781, -1.5945,
-    -0.0838, -0.587, 0.5485, -0.0942, -0.4841, 0.5219, -0.3138,
-    -0.1061, 0.1833, 0.1271, 0.2161, -1.5723, -2.2373, -2.8444,
-])  # fmt: skip
+# The succeeding (context, θ) pairs of tests/test_robot_box_pushing.py: the code's layout
+# (35 parameters, the default) and the thesis's (28).
+THETA_CODE, CTX = EXAMPLES["box-pushing-obstacle"].arrays()
+THETA_OK, _ = THESIS_EXAMPLES["box-pushing-obstacle"].arrays()
+THETAS = {"code": THETA_CODE, "thesis": THETA_OK}
 
 # Numbers of Appendix B.4.2.1 / the Franka data sheet, written out here on purpose.
 KP = 0.01 * np.array([120.0, 120, 120, 120, 50, 30, 10])
@@ -106,15 +104,24 @@ def test_bad_input_errors(cls) -> None:
 
 
 # -- box pushing ---------------------------------------------------------------------------
-def _hand_reward(d: mujoco.MjData, m: mujoco.MjModel, a: np.ndarray, final: bool) -> float:
-    """B.4.2.1's reward from the MuJoCo state, written out independently of the package."""
+def _hand_reward(
+    d: mujoco.MjData, m: mujoco.MjModel, a: np.ndarray, final: bool, settings: str = "code"
+) -> float:
+    """The reward from the MuJoCo state, written out independently of the package:
+    ``settings="thesis"``: B.4.2.1's R_tot; ``"code"``: BoxPushingObstacleTemporalSparse's
+    (rod–box weight 2, clip at 100, tilt cost only above π/4, −50 ‖q̇_T‖ at the end)."""
     box = d.xpos[m.body("box_0").id]
     box_q = d.xquat[m.body("box_0").id]
     tip = d.site_xpos[m.site("rod_tip").id]
     rod_q = d.xquat[m.body("push_rod").id]
     q, qd = d.qpos[:7], d.qvel[:7]
-    r = -min(max(math.dist(box, tip), 0.05), 10.0)
-    r -= min(max(2 / math.pi * math.acos(min(abs(rod_q[1]), 1.0)), 0.25), 2.0)
+    tilt = 2 * math.acos(min(abs(rod_q[1]), 1.0))  # the angle to (0, 1, 0, 0)
+    if settings == "thesis":
+        r = -min(max(math.dist(box, tip), 0.05), 10.0)
+        r -= min(max(2 / math.pi * math.acos(min(abs(rod_q[1]), 1.0)), 0.25), 2.0)
+    else:
+        r = -2 * min(max(math.dist(box, tip), 0.05), 100.0)
+        r -= tilt / math.pi if tilt > math.pi / 4 else 0.0
     r -= 0.02 * sum((10 * x) ** 2 for x in a)
     for i in range(7):
         r -= max(q[i] - Q_HI[i], 0) + max(Q_LO[i] - q[i], 0) + max(abs(qd[i]) - QD_HI[i], 0)
@@ -123,15 +130,20 @@ def _hand_reward(d: mujoco.MjData, m: mujoco.MjModel, a: np.ndarray, final: bool
         gq = np.array([math.cos(CTX[2] / 2), 0, 0, math.sin(CTX[2] / 2)])
         r -= 350 * math.dist(box, goal)
         r -= 200 * math.acos(min(abs(float(box_q @ gq)), 1.0)) / math.pi
+        if settings == "code":
+            r -= 50 * math.sqrt(sum(v * v for v in qd))
     return r
 
 
-def test_box_replay_equals_episodic_return(bp_env: BoxPushingObstacleStepEnv) -> None:
-    """The PD actions of a succeeding θ, sent step by step: per-step rewards equal B.4.2.1's
-    formula on the MuJoCo state, their sum equals the episodic return, and success is
-    reported at the end."""
-    env, task = bp_env, BoxPushingObstacle()
-    q_d, dq_d = task.mp.trajectory(THETA_OK, Q_START)
+@pytest.mark.parametrize("settings", ["code", "thesis"])
+def test_box_replay_equals_episodic_return(settings: str) -> None:
+    """The PD actions of a succeeding θ, sent step by step: per-step rewards equal the
+    settings' formula on the MuJoCo state, their sum equals the episodic return, and success
+    is reported at the end."""
+    env = BoxPushingObstacleStepEnv(settings=settings)
+    task = BoxPushingObstacle(settings=settings)
+    assert env.task.reward == task.reward == settings
+    q_d, dq_d = task.mp.trajectory(THETAS[settings], Q_START)
     obs, info = env.reset(options={"context": CTX})
     m, d = env.task.model, env.task.data
     np.testing.assert_array_equal(info["context"], CTX)
@@ -143,10 +155,11 @@ def test_box_replay_equals_episodic_return(bp_env: BoxPushingObstacleStepEnv) ->
     for t in range(100):
         a = np.clip(KP * (q_d[t + 1] - d.qpos[:7]) + KD * (dq_d[t + 1] - d.qvel[:7]), -1, 1)
         obs, r, term, trunc, info = env.step(a)
-        assert r == pytest.approx(_hand_reward(d, m, a, final=t == 99), rel=1e-12, abs=1e-12)
+        want = _hand_reward(d, m, a, final=t == 99, settings=settings)
+        assert r == pytest.approx(want, rel=1e-12, abs=1e-12)
         assert term == (t == 99) and not trunc and obs[-1] == pytest.approx((t + 1) / 100)
         rewards.append(r)
-    ep = task.evaluate(THETA_OK, CTX, workers=0)
+    ep = task.evaluate(THETAS[settings], CTX, workers=0)
     assert sum(rewards) == pytest.approx(ep.returns[0], rel=1e-12)
     assert ep.success[0] and info["success"] is True
     assert info["pos_error"] == pytest.approx(ep.info["pos_error"][0], rel=1e-12)
@@ -170,7 +183,7 @@ def test_box_torque_law_and_clipping(bp_env: BoxPushingObstacleStepEnv) -> None:
     np.testing.assert_allclose(d.ctrl, np.clip(10 * ac + bias, -lim, lim), rtol=0, atol=1e-12)
     # torque cost 0.02 Σ(10 a)² of the clipped action: 2 Σ a²
     m = env.task.model
-    assert r == pytest.approx(_hand_reward(d, m, ac, final=False), rel=1e-12)
+    assert r == pytest.approx(_hand_reward(d, m, ac, final=False), rel=1e-12)  # the code's
     assert 2 * np.sum(ac**2) == pytest.approx(0.02 * np.sum((10 * ac) ** 2))
 
 
@@ -195,8 +208,38 @@ def test_box_sampled_contexts_follow_the_task_rules(bp_env: BoxPushingObstacleSt
     assert len({tuple(c) for c in cs}) == 30
     g, o = cs[:, :2], cs[:, 3:5]
     assert np.all(np.hypot(*(g - [0.4, 0.3]).T) > 0.3)
+    # the code's y-distances (which imply B.4.2.1's Euclidean ones)
+    assert np.all(np.abs(o[:, 1] - g[:, 1]) >= 0.15) and np.all(np.abs(o[:, 1] - 0.3) >= 0.15)
     assert np.all(np.hypot(*(o - g).T) >= 0.15) and np.all(cs[:, 1] < cs[:, 4])
     assert np.all((cs >= [0.3, -0.7, 0, 0.3, -0.3]) & (cs <= [0.6, 0.45, 2 * np.pi, 0.6, 0.15]))
+    # B.4.2.1's Euclidean rule accepts an obstacle beside the goal that the code rejects
+    beside = [0.35, -0.3, 1.0, 0.55, -0.25]
+    with pytest.raises(ValueError, match="outside the task's context space"):
+        env.reset(options={"context": beside})
+    thesis = BoxPushingObstacleStepEnv(settings="thesis")
+    np.testing.assert_array_equal(thesis.reset(options={"context": beside})[1]["context"], beside)
+
+
+def test_box_settings_options_and_the_scene_without_obstacle() -> None:
+    with pytest.raises(ValueError, match=r"settings must be one of \('code', 'thesis'\), got 'x'"):
+        BoxPushingObstacleStepEnv(settings="x")
+    env = BoxPushingObstacleStepEnv(settings="thesis", reward="code")
+    assert (env.task.reward, env.task.distance_rule, env.task.joint_limit_check) == (
+        "code", "euclidean", False)  # fmt: skip
+    free = BoxPushingObstacleStepEnv(obstacle=False)
+    m = free.task.model
+    assert "obstacle" not in {m.body(i).name for i in range(m.nbody)}
+    obs, _ = free.reset(options={"context": CTX})
+    np.testing.assert_allclose(obs[27:29], CTX[3:5])  # the context's obstacle entries
+    with_obstacle = BoxPushingObstacleStepEnv()
+    with_obstacle.reset(options={"context": CTX})
+    # away from the obstacle both scenes step alike: the same state after a few steps
+    for _ in range(5):
+        a = np.full(7, 0.05)
+        o1, r1, *_ = free.step(a)
+        o2, r2, *_ = with_obstacle.step(a)
+    np.testing.assert_allclose(o1, o2, rtol=0, atol=1e-9)
+    assert r1 == pytest.approx(r2, abs=1e-9)
 
 
 # -- 5-link reacher --------------------------------------------------------------------------

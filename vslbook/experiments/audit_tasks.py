@@ -103,22 +103,36 @@ def _tt3_context_penalty(task: Any) -> str:
     return f"{p:.6g} at d = 0.1"
 
 
-def _bpo_reward(task: Any) -> tuple[float, float]:
-    """box_pushing.step_reward probed: (weight of the box–rod distance, weight of ‖q̇_T‖)"""
-    from vslbook.envs.robot import box_pushing as bp
+def _bpo_probe(task: Any, rod: float, dq: np.ndarray, final: bool = True) -> float:
+    """box_pushing.step_reward with the task's reward variant at a probe state: box, goal
+    and rod tip on the x-axis (the tip ``rod`` m from the box), the box at the goal pose,
+    an upright rod, joints mid-range, joint velocities ``dq``, no torque."""
+    from vslbook.envs.robot import box_pushing_reward as bp
 
     quat, z3 = np.array([1.0, 0, 0, 0]), np.zeros(3)
-    q, dq = (bp.Q_MAX + bp.Q_MIN) / 2, np.zeros(7)
+    q = (bp.Q_MAX + bp.Q_MIN) / 2
+    return bp.step_reward(
+        z3, quat, z3, quat, np.array([rod, 0, 0]), bp.ROD_QUAT_DESIRED, q, dq, np.zeros(7),
+        final, task.reward,
+    )  # fmt: skip
 
-    def r(rod: float, dq: np.ndarray) -> float:
-        return bp.step_reward(
-            z3, quat, z3, quat, np.array([rod, 0, 0]), bp.ROD_QUAT_DESIRED, q, dq, np.zeros(7), True
-        )
 
-    rod_w = r(1.0, dq) - r(2.0, dq)
+def _bpo_reward(task: Any) -> tuple[float, float]:
+    """box_pushing.step_reward (task.reward) probed: (weight of the box–rod distance, weight
+    of ‖q̇_T‖)"""
+    rest = np.zeros(7)
     vel = np.zeros(7)
     vel[0] = 0.5
-    return round(rod_w, 9), round((r(1.0, dq) - r(1.0, vel)) / 0.5, 9)
+    rod_w = _bpo_probe(task, 1.0, rest) - _bpo_probe(task, 2.0, rest)
+    vel_w = (_bpo_probe(task, 1.0, rest) - _bpo_probe(task, 1.0, vel)) / 0.5
+    return round(rod_w, 9), round(vel_w, 9)
+
+
+def _bpo_tilt_cost(task: Any) -> float:
+    """box_pushing.step_reward (task.reward) probed: the cost of an upright rod (tilt 0) in
+    one step, what is left after the box–rod term of a tip 0.05 m from the box"""
+    rod_w = _bpo_reward(task)[0]
+    return round(-_bpo_probe(task, 0.05, np.zeros(7), final=False) - rod_w * 0.05, 9)
 
 
 def _bpo_distance_rule(task: Any) -> str:
@@ -267,7 +281,8 @@ TASK_SETTINGS: list[Setting] = [
             ("obstacle–goal distance rule", "Euclidean distance >= 0.15", "B.4.2.1",
              "y-distance >= 0.15",
              _MJ + "box_pushing/box_pushing_obstacle_env.py" + _FACTS.format("§1.5"),
-             _bpo_distance_rule, "thesis"),
+             _bpo_distance_rule,
+             "code (settings=\"thesis\" gives B.4.2.1's Euclidean distances)"),
             ("control dt (s)", NOT_STATED, "B.4.2.1 gives none", 0.02,
              _MJ + "box_pushing/box_pushing_env.py frame_skip 10 × 0.002" + _FACTS.format("§1.5"),
              _mp("dt"), _CODE),
@@ -285,18 +300,23 @@ TASK_SETTINGS: list[Setting] = [
              _mp("tau"), _CODE),
             ("goal mode", "disabled", "B.4.2.1 (28 = 7·4)", "learned",
              _REG + " l.141-142 (disable_goal False, relative_goal False)", _mp("goal"),
-             "thesis (goal='learned' gives the code's 35)"),
+             "code (settings=\"thesis\" gives B.4.2.1's disabled goal)"),
             ("weights_scale", NOT_STATED, "B.4.2.1 gives none", 0.3,
              _REG + " l.131 (the 0.8 of l.118 is overwritten)", _mp("weights_scale"), _CODE),
             ("parameters θ", 28, "B.4.2.1", 35, _REG + " l.138-142 (7·4 + 7 goals)", "n_params",
-             "thesis"),
+             "code (settings=\"thesis\" gives B.4.2.1's 28)"),
             ("reward: weight of box–rod distance, of ‖q̇_T‖", (1.0, 0.0), "B.4.2.1", (2.0, 50.0),
              _MJ + "box_pushing/box_pushing_obstacle_env.py BoxPushingObstacleTemporalSparse" + _FACTS.format("§1.5"),  # noqa: E501
-             _bpo_reward, "thesis"),
+             _bpo_reward, "code (settings=\"thesis\" gives B.4.2.1's R_tot)"),
+            ("reward: rod tilt cost per step below π/4", 0.25,
+             "B.4.2.1 (R_rod_rotation clipped at 0.25)", 0.0,
+             _MJ + "box_pushing/box_pushing_obstacle_env.py BoxPushingObstacleTemporalSparse" + _FACTS.format("§1.5"),  # noqa: E501
+             _bpo_tilt_cost, "code (settings=\"thesis\" gives B.4.2.1's R_tot)"),
             ("θ outside joint limits rejected unsimulated", NOT_STATED, "B.4.2.1 gives none",
              False,
              _MJ + "box_pushing/box_pushing_obstacle_env.py (no validity check)" + _FACTS.format("§1.5"),  # noqa: E501
-             "joint_limit_check", "ours (asked of this re-implementation)"),
+             "joint_limit_check",
+             "code (settings=\"thesis\" rejects them: asked of this re-implementation)"),
             ("success: position (m), rotation (rad)", (0.05, 0.5), "B.4.2.1", (0.05, 0.5),
              _MJ + "box_pushing/box_pushing_obstacle_env.py" + _FACTS.format("§1.5"),
              _consts("box_pushing", "SUCCESS_POS", "SUCCESS_ROT"), "both agree"),

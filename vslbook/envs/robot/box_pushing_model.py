@@ -17,6 +17,10 @@ Edits:
 * **Targets** (``target_pos``, ``replan_target_pos``, sites only) become mocap bodies as
   well, so the goal pose is set in ``data`` and the compiled model never changes between
   episodes.
+
+``obstacle=False`` leaves the obstacle out: the scene of fancy-gym 0.3.0's box pushing
+(``BoxPushingDense`` and its siblings), which the step-by-step physics check
+(``tests/test_box_pushing_reference.py``) compares against.
 """
 
 from __future__ import annotations
@@ -37,11 +41,14 @@ _WALL_T = 0.005
 _GEOM_BOX = mujoco.mjtGeom.mjGEOM_BOX
 
 
-def build_spec() -> mujoco.MjSpec:
-    """The editable spec: fancy-gym's box pushing model plus the obstacle, mocap targets."""
+def build_spec(obstacle: bool = True) -> mujoco.MjSpec:
+    """The editable spec: fancy-gym's box pushing model with mocap targets, plus the
+    obstacle unless ``obstacle`` is False."""
     spec = load_spec(MODEL_FILE, PATCHES)
     for name in ("target_pos", "replan_target_pos"):
         spec.body(name).mocap = True
+    if not obstacle:
+        return spec
     body = spec.worldbody.add_body(name="obstacle", mocap=True, pos=[0.4, 0.0, OBSTACLE_Z])
     hx, hy, hz = OBSTACLE_HALF
     body.add_geom(
@@ -63,9 +70,9 @@ def build_spec() -> mujoco.MjSpec:
     return spec
 
 
-def build_model() -> mujoco.MjModel:
-    """The compiled model (timestep 0.002 as in the file)."""
-    model = build_spec().compile()
+def build_model(obstacle: bool = True) -> mujoco.MjModel:
+    """The compiled model (timestep 0.002 as in the file), with or without the obstacle."""
+    model = build_spec(obstacle).compile()
     if not np.isclose(model.opt.timestep, 0.002):  # pragma: no cover - guards a changed file
         raise RuntimeError(f"unexpected timestep {model.opt.timestep} in {MODEL_FILE}")
     return model
