@@ -366,7 +366,9 @@ for eps in (1e-3, 1e-2, 1e-1):
 # `vslbook.erl.hireps`), then, as in the thesis, draw 100 experts from $\pi(o\mid c)$ for
 # each of six targets (the thesis gives no coordinates; these are the authors') and plot
 # the arms of the chosen experts' means (one colour per expert), and each expert's context
-# distribution (2σ ellipses, opacity ∝ π(o)).
+# distribution (2σ ellipses, opacity ∝ π(o)). Every run is one `vslbook run` command
+# (`vslbook plan fig3-1` lists them; the variant without responsibilities is
+# `--set responsibilities=false`), declared once in `vslbook.experiments.ch3_runs`.
 #
 # **The thesis's outcome (Fig. 3.1, 60 experts, best of 15 seeds):** with the
 # responsibilities the solutions are versatile (several experts per target), precise and
@@ -387,17 +389,17 @@ import time
 from pathlib import Path
 
 from vslbook.experiments import svsl_planar as P
+from vslbook.experiments.ch3_runs import figure_runs, run_set
 from vslbook.plots import interval_plot
 from vslbook.stats import interval_estimates
 
 counts = P.planar_counts(budget)
 print("counts at this budget:", counts)
 root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
-planar_runs = {v: [] for v in P.VARIANTS}
+no_resp = next(r for r in figure_runs("fig3-1", budget) if r.overrides)
+print("each run is one `vslbook run` command, e.g.", no_resp.command(root))
 t0 = time.perf_counter()
-for variant in P.VARIANTS:
-    for seed in range(counts["seeds"]):
-        planar_runs[variant].append(P.run_planar(variant, seed, root, budget, progress=True))
+planar_runs = run_set("fig3-1", budget, root, progress=True)  # variant -> run directories
 print(f"{sum(map(len, planar_runs.values()))} runs ready in {time.perf_counter() - t0:.0f} s")
 models = {v: [P.load_model(p) for p in paths] for v, paths in planar_runs.items()}
 
@@ -590,7 +592,9 @@ plt.show()
 # with Eq. 3.9 and clearly with Eq. 3.10, where PPO gets stuck in a local optimum.
 # **Ours** uses the counts in the figure's footnote (a budget scales experts, iterations,
 # PPO steps and seeds only). A goal that SVSL's context distribution puts outside the half
-# disk is simulated and punished (see `vslbook.envs.robot.reacher5`).
+# disk is simulated and punished (see `vslbook.envs.robot.reacher5`). Each run is
+# `vslbook run svsl --env vslbook/Reacher5Ch3-v0 --set reward=R` or `vslbook run ppo --env
+# vslbook/Reacher5Ch3Step-v0 --set reward=R` at the budget (`vslbook plan fig3-5`).
 
 # %%
 from vslbook.experiments import svsl_reacher as RE

@@ -1,8 +1,8 @@
 """`vslbook run svsl / hireps / ladips / ppo`: the presets per env, exact resume, bad input.
 
-The presets are compared with Tables A.1-A.5 written out here; a run through
-:func:`vslbook.training.run` is compared with the Chapter 3 notebook's own runner, so the
-command line trains what the figures show.
+The presets are compared with Tables A.1-A.5 written out here; a run of
+:func:`vslbook.training.run` is the one the Chapter 3 figures declare
+(:mod:`vslbook.experiments.ch3_runs`), so the command line trains what the figures show.
 """
 
 from __future__ import annotations
@@ -75,17 +75,15 @@ def test_a_budget_changes_only_counts():
 
 
 def test_cli_run_trains_the_notebooks_configuration(tmp_path):
-    """`vslbook run svsl` on the planar reacher = the Fig. 3.1 runner of the notebook."""
-    from vslbook.experiments.svsl_planar import run_planar
+    """`vslbook run svsl` on the planar reacher trains the run Fig. 3.1 (the notebook,
+    `vslbook figure fig3-1`) draws: the figure finds it finished and reuses it."""
+    from vslbook.experiments.ch3_runs import run_set
 
-    rd = run("svsl", PLANAR, seed=1, budget="smoke", root=tmp_path / "cli", progress=False)
-    assert rd.done
-    notebook = run_planar("SVSL", 1, tmp_path / "nb", "smoke")
-    ours, theirs = _rows(rd.path), _rows(notebook)
-    assert len(ours) == len(theirs) == 110  # N K + weight iterations at smoke: 2 * 50 + 10
-    for a, b in zip(ours, theirs, strict=True):
-        for key in ("samples", "test_return", "experts"):
-            assert a.get(key) == b.get(key), (a["step"], key)
+    rd = run("svsl", PLANAR, seed=0, budget="smoke", root=tmp_path, progress=False)
+    assert rd.done and len(_rows(rd.path)) == 110  # N K + weight iterations: 2 * 50 + 10
+    stamp = (rd.path / "DONE").stat().st_mtime_ns
+    assert run_set("fig3-1", "smoke", tmp_path, methods=("SVSL",)) == {"SVSL": [rd.path]}
+    assert (rd.path / "DONE").stat().st_mtime_ns == stamp
 
 
 @pytest.mark.parametrize(("algo", "env", "first"), [
@@ -133,15 +131,25 @@ def test_bad_input_names_the_value(tmp_path, capsys):
 
 
 def test_reacher_run_is_the_notebooks_and_tested_on_ppos_goals(tmp_path):
-    """SVSL on the 5-link reacher: the Fig. 3.5 runner's numbers (scored on PPO's goals)."""
-    from vslbook.experiments.svsl_reacher import run_reacher
+    """SVSL on the 5-link reacher with `--set reward=3.8` is Fig. 3.5's run (the same
+    directory), tested on PPO's evaluation goals."""
+    import numpy as np
 
-    rd = run("svsl", REACHER, seed=0, budget="smoke", root=tmp_path / "cli", progress=False,
+    from vslbook.erl.ppo import evaluation_goals
+    from vslbook.experiments.ch3_runs import figure_runs
+    from vslbook.experiments.svsl_mixtures import load_model
+
+    rd = run("svsl", REACHER, seed=0, budget="smoke", root=tmp_path, progress=False,
              overrides={"reward": "3.8"})  # fmt: skip
-    notebook = run_reacher("SVSL", "3.8", 0, tmp_path / "nb", "smoke")
-    ours, theirs = _rows(rd.path), _rows(notebook)
-    assert [r.get("test_return") for r in ours] == [r.get("test_return") for r in theirs]
-    assert ours[-1]["test_return"] is not None and rd.config["reward"] == "3.8"
+    (declared,) = [r for r in figure_runs("fig3-5", "smoke") if r.method == "SVSL Eq. 3.8"]
+    assert declared.name == rd.name and declared.train(tmp_path) == rd.path
+    rows = _rows(rd.path)
+    assert rows[-1]["test_return"] is not None and rd.config["reward"] == "3.8"
+    model = load_model(rd.path)  # the last test: θ ~ π(θ | c) on the goals PPO is scored on
+    goals = evaluation_goals(rd.config["test_contexts"])
+    theta, _ = model.model.sample(goals, np.random.default_rng([0, 2, len(rows)]))
+    out = model.task.evaluate(theta, goals, workers=0)
+    assert rows[-1]["test_return"] == pytest.approx(float(np.mean(out.returns)), rel=1e-12)
 
 
 def test_sweep_checks_each_env_against_its_preset(tmp_path):

@@ -6,8 +6,7 @@ import numpy as np
 import pytest
 
 from vslbook.envs.robot import make_task
-from vslbook.erl.svsl import SVSL, run, svsl_config, train
-from vslbook.results import RunDir
+from vslbook.erl.svsl import SVSL, svsl_config, train
 
 
 def _tiny(**kw):
@@ -128,30 +127,61 @@ def test_deterministic_and_resumes_exactly(task, line_13):
         np.testing.assert_array_equal(v, b.model.arrays()[k])
 
 
+PLANAR = "vslbook/PlanarReacher-v0"
+#: `vslbook run svsl --env vslbook/PlanarReacher-v0 --set ...`: the _tiny() configuration
+TINY_SETS = dict(
+    n_experts=3, iterations_per_expert=6, fine_tune_every=3, weight_iterations=4,
+    test_every=3, test_contexts=20, delete_local_optima=False,
+)  # fmt: skip
+
+
+def _metrics(rd):
+    return [{k: v for k, v in m.items() if k != "iteration_seconds"} for m in rd.metrics()]
+
+
 def test_run_directory_resumes(tmp_path):
-    cfg = _tiny()
-    full = RunDir(run("planar-reacher", cfg, 5, tmp_path / "a", checkpoint_every=5))
-    # an interrupted run: only the first 12 iterations, checkpointed at 10, then resumed
-    from vslbook.erl import svsl as mod
+    """A run directory of `vslbook run svsl` (vslbook.training.run) that crashed after
+    logging two iterations past its last checkpoint resumes to the uninterrupted run."""
+    from vslbook.training import run
 
-    task = make_task("planar-reacher")
-    rd = RunDir.create(
-        tmp_path / "b",
-        {"algo": "svsl", "env": "planar-reacher", "task_kwargs": {}, "seed": 5}
-        | __import__("dataclasses").asdict(cfg),
-        code_exclude=("srl/",),
-    )
-    mod.train(
-        task, cfg, 5, until=12, callback=lambda i, m: rd.log(i, **m),
-        checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}), checkpoint_every=5,
-    )  # fmt: skip
-    resumed = RunDir(run("planar-reacher", cfg, 5, tmp_path / "b", checkpoint_every=5))
-    assert resumed.done and full.done
+    kwargs = dict(overrides=TINY_SETS, progress=False)
+    full = run("svsl", PLANAR, 5, "smoke", root=tmp_path / "a", **kwargs)
+    assert full.done and len(full.metrics()) == 3 * 6 + 4
+    assert full.config["n_experts"] == 3 and full.config["alpha"] == _tiny().alpha
+    part = run("svsl", PLANAR, 5, "smoke", root=tmp_path / "b", stop_after=10, **kwargs)
+    assert not part.done and part.load_checkpoint()["svsl"]["iteration"] == 10
+    lines = full.metrics_path.read_text().splitlines(keepends=True)
+    with open(part.metrics_path, "a") as f:  # iterations 11 and 12 logged, then the crash
+        f.writelines(lines[10:12])
+    resumed = run("svsl", PLANAR, 5, "smoke", root=tmp_path / "b", **kwargs)
+    assert resumed.done and _metrics(resumed) == _metrics(full)
 
-    def rows(r):
-        return [{k: v for k, v in m.items() if k != "iteration_seconds"} for m in r.metrics()]
 
-    assert rows(resumed) == rows(full)
+def test_finished_run_made_by_other_code_is_redone_only_if_it_replays_otherwise(tmp_path):
+    import json
+
+    from vslbook.training import run
+
+    kwargs = dict(root=tmp_path, progress=False,
+                  overrides=TINY_SETS | dict(n_experts=1, iterations_per_expert=3,
+                                             weight_iterations=0, test_every=1))  # fmt: skip
+    first = run("svsl", PLANAR, 6, "smoke", **kwargs)
+    assert run("svsl", PLANAR, 6, "smoke", **kwargs).path == first.path  # same code: reused
+    env = json.loads((first.path / "env.json").read_text())
+    env["code_hash"] = "0" * 64  # made by other code ...
+    (first.path / "env.json").write_text(json.dumps(env))
+    assert run("svsl", PLANAR, 6, "smoke", **kwargs).path == first.path  # ... same numbers
+    assert not (tmp_path / "_stale").exists()
+    env = json.loads((first.path / "env.json").read_text())
+    env["code_hash"], env["code_hashes_verified"] = "0" * 64, []
+    (first.path / "env.json").write_text(json.dumps(env))
+    lines = first.metrics_path.read_text().splitlines(keepends=True)
+    row = json.loads(lines[0])
+    row["test_return"] += 1.0  # ... other numbers
+    first.metrics_path.write_text(json.dumps(row) + "\n" + "".join(lines[1:]))
+    again = run("svsl", PLANAR, 6, "smoke", **kwargs)
+    assert again.path == first.path and again.done and again.code_matches
+    assert len(list((tmp_path / "_stale").iterdir())) == 1  # the old one moved aside
 
 
 def test_line_13_deletes_the_newest_expert_by_the_authors_rule(task):
@@ -229,16 +259,6 @@ def test_bad_configuration(task):
         svsl_config("planar-reacher", buffer_size=10)
     with pytest.raises(ValueError, match="local_optimum_factor must be a positive number, got 0"):
         svsl_config("planar-reacher", local_optimum_factor=0)
-
-
-def test_finished_run_made_by_other_code_is_redone(tmp_path, monkeypatch):
-    cfg = _tiny(n_experts=1, iterations_per_expert=3, weight_iterations=0)
-    path = run("planar-reacher", cfg, 6, tmp_path)
-    assert run("planar-reacher", cfg, 6, tmp_path) == path  # same code: reused
-    monkeypatch.setattr(RunDir, "code_matches", property(lambda self: False))
-    again = run("planar-reacher", cfg, 6, tmp_path)
-    assert again == path and RunDir(again).done
-    assert len(list((tmp_path / "_stale").iterdir())) == 1  # the old one moved aside
 
 
 def test_mixture_densities_agree_with_the_dists_mixture():

@@ -24,13 +24,47 @@ def test_full_budget_counts_are_the_thesis():
         P.variant_config("MORE", "full")
 
 
+def test_the_figures_runs_are_the_command_lines_presets():
+    """Fig. 3.1's runs: each variant is `vslbook run` with the planar preset (the variant
+    without responsibilities by `--set responsibilities=false`), its config the variant's."""
+    from dataclasses import asdict
+
+    from vslbook.budget import get_budget
+    from vslbook.experiments.ch3_runs import figure_runs
+    from vslbook.registry import config_from_overrides, get_algorithm
+
+    for budget in ("smoke", "reduced", "full"):
+        runs = figure_runs("fig3-1", budget)
+        n = P.planar_counts(budget)
+        assert [r.method for r in runs] == [v for v in P.VARIANTS for _ in range(n["seeds"])]
+        for r in runs:
+            spec = get_algorithm(r.algo)
+            preset = spec.default_config(r.env, get_budget(budget), r.overrides)
+            config = config_from_overrides(spec.config, r.overrides, preset)
+            variant = asdict(P.variant_config(r.method, budget))
+            assert {k: asdict(config)[k] for k in variant} == variant, (budget, r.method)
+            length = config.iterations if r.algo == "hireps" else config.total_iterations
+            assert r.length == length
+    (no_resp,) = [r for r in figure_runs("fig3-1", "smoke") if r.overrides]
+    assert no_resp.command("runs") == (
+        "vslbook run svsl --env vslbook/PlanarReacher-v0 --seed 0 --budget smoke "
+        "--set responsibilities=false --root runs"
+    )
+
+
 @pytest.mark.parametrize("variant", P.VARIANTS)
 def test_smoke_run_reloads_and_is_reused(variant, tmp_path):
-    path = P.run_planar(variant, 0, tmp_path, "smoke")
+    from vslbook.experiments.ch3_runs import run_set
+
+    (path,) = run_set("fig3-1", "smoke", tmp_path, methods=(variant,))[variant]
     assert RunDir.open(path).done
     mtime = (path / "DONE").stat().st_mtime_ns
-    assert P.run_planar(variant, 0, tmp_path, "smoke") == path  # finished: reused
+    assert run_set("fig3-1", "smoke", tmp_path, methods=(variant,))[variant] == [path]  # reused
     assert (path / "DONE").stat().st_mtime_ns == mtime
+    config = RunDir.open(path).config
+    expected = {"SVSL": True, "SVSL, no responsibilities": False, "HiREPS": None}[variant]
+    assert config["algo"] == variant.split(",")[0].lower()
+    assert config.get("responsibilities") is expected
     model = P.load_model(path)
     s = P.planar_scores(model, n_contexts=10, n_draws=5)
     assert s["tip_distance"] > 0 and 0 <= s["collision_rate"] <= 1

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, replace
+from dataclasses import asdict
 from pathlib import Path
 
 import matplotlib
@@ -12,10 +12,9 @@ import pytest
 from scipy.stats import trim_mean
 
 from vslbook.envs.robot import make_task
-from vslbook.erl.ppo import PPOConfig
 from vslbook.erl.svsl import svsl_config
 from vslbook.experiments import svsl_reacher as sr
-from vslbook.experiments.svsl_planar import load_model
+from vslbook.experiments.svsl_mixtures import load_model
 
 matplotlib.use("Agg")
 
@@ -24,7 +23,7 @@ TINY_SVSL = {
     "n_experts": 1, "iterations_per_expert": 3, "weight_iterations": 0, "buffer_size": 30,
     "new_samples_expert": 10, "new_samples_context": 5, "test_every": 1, "test_contexts": 10,
 }  # fmt: skip
-TINY_PPO = PPOConfig(n_rollout_steps=512, n_envs=2, n_epochs=1, total_steps=2 * 512)
+TINY_PPO = {"n_rollout_steps": 512, "n_envs": 2, "n_epochs": 1, "total_steps": 2 * 512}
 COUNTS = ("n_experts", "iterations_per_expert", "weight_iterations", "test_every", "test_contexts")
 
 
@@ -65,32 +64,94 @@ def test_budget_changes_only_counts(budget: str, reward: str) -> None:
     assert a == base
 
 
+def _train(method: str, reward: str, seed: int, root: Path, overrides: dict) -> Path:
+    """The run ``vslbook run svsl|ppo --env ... --set reward=R --set k=v ...`` trains."""
+    from vslbook.training import run
+
+    env = {"SVSL": "vslbook/Reacher5Ch3-v0", "PPO": "vslbook/Reacher5Ch3Step-v0"}[method]
+    rd = run(method.lower(), env, seed, "smoke", root=root, progress=False,
+             overrides={"reward": reward, **overrides})  # fmt: skip
+    assert rd.done
+    return rd.path
+
+
+def test_the_figures_runs_are_the_command_lines_presets() -> None:
+    """Fig. 3.5's runs: `vslbook run svsl|ppo --set reward=R` at the budget, whose configs
+    are :func:`reacher_configs`'s (PPO's evaluation schedule from :func:`reacher_counts`)."""
+    from vslbook.budget import get_budget
+    from vslbook.experiments.ch3_runs import figure_runs
+    from vslbook.registry import config_from_overrides, get_algorithm
+
+    for budget in ("smoke", "reduced", "full"):
+        n = sr.reacher_counts(budget)
+        runs = figure_runs("fig3-5", budget)
+        assert [(r.method, r.seed) for r in runs] == [
+            (f"{m} Eq. {reward}", seed) for reward in sr.REWARDS for m in sr.METHODS
+            if m == "SVSL" or reward in n["ppo_rewards"] for seed in range(n["seeds"])
+        ]  # fmt: skip
+        for r in runs:
+            assert r.overrides == {"reward": r.method.split()[-1]}
+            spec = get_algorithm(r.algo)
+            preset = spec.default_config(r.env, get_budget(budget), r.overrides)
+            config = config_from_overrides(spec.config, r.overrides, preset)
+            svsl, ppo = sr.reacher_configs(r.overrides["reward"], budget)
+            ours = asdict(svsl if r.algo == "svsl" else ppo)
+            assert {k: asdict(config)[k] for k in ours} == ours, (budget, r.method)
+            if r.algo == "ppo":
+                assert (config.eval_every, config.eval_episodes) == (n["ppo_eval_every"],
+                                                                     n["eval_goals"])  # fmt: skip
+                assert (r.length, r.unit) == (config.total_steps, "env_steps")
+            else:
+                assert (r.length, r.unit) == (config.total_iterations, "step")
+
+
+def test_reacher_runs_train_the_declared_runs(tmp_path: Path, monkeypatch) -> None:
+    """reacher_runs: each declared run trained in the root, keyed (method, reward)."""
+    from vslbook.experiments.run_plan import FigureRun
+
+    trained = []
+
+    def train(self, root, *, progress=False, **kwargs):
+        trained.append((self, root, progress))
+        return Path(root) / self.name
+
+    monkeypatch.setattr(FigureRun, "train", train)
+    runs = sr.reacher_runs(tmp_path, "smoke", progress=True)
+    assert runs == {
+        ("SVSL", "3.8"): [tmp_path / trained[0][0].name],
+        ("PPO", "3.8"): [tmp_path / trained[1][0].name],
+        ("SVSL", "3.9"): [tmp_path / trained[2][0].name],
+        ("SVSL", "3.10"): [tmp_path / trained[3][0].name],
+    }
+    assert [r.algo for r, *_ in trained] == ["svsl", "ppo", "svsl", "svsl"]
+    assert all(root == tmp_path and progress for _, root, progress in trained)
+
+
 def test_bad_method_and_reward(tmp_path: Path) -> None:
-    with pytest.raises(ValueError, match="method"):
-        sr.run_reacher("TRPO", "3.8", 0, tmp_path, "smoke")
+    from vslbook.training import run
+
     with pytest.raises(ValueError, match="reward"):
-        sr.run_reacher("SVSL", "3.7", 0, tmp_path, "smoke")
+        run("svsl", "vslbook/Reacher5Ch3-v0", 0, "smoke", root=tmp_path,
+            overrides={"reward": "3.7"})  # fmt: skip
     with pytest.raises(ValueError, match="reward"):
         sr.reacher_configs("3.11")
     with pytest.raises(ValueError, match="method"):
         sr.reacher_curves({("DIME", "3.8"): []})
     with pytest.raises(ValueError, match="seed"):
-        sr.run_reacher("PPO", "3.8", -1, tmp_path, "smoke")
-    with pytest.raises(ValueError, match="SVSLConfig"):
-        sr.run_reacher("SVSL", "3.8", 0, tmp_path, "smoke", config=TINY_PPO)
+        run("ppo", "vslbook/Reacher5Ch3Step-v0", -1, "smoke", root=tmp_path,
+            overrides={"reward": "3.8"})  # fmt: skip
     with pytest.raises(ValueError, match="unknown budget"):
         sr.reacher_counts("huge")
+    assert not any(tmp_path.iterdir())
 
 
 @pytest.fixture(scope="module")
 def tiny_runs(tmp_path_factory: pytest.TempPathFactory) -> dict:
     root = tmp_path_factory.mktemp("reacher")
-    svsl = replace(sr.reacher_configs("3.10", "smoke")[0], **TINY_SVSL)
     return {
         "root": root,
-        "svsl_config": svsl,
-        ("SVSL", "3.10"): [sr.run_reacher("SVSL", "3.10", 4, root, "smoke", config=svsl)],
-        ("PPO", "3.8"): [sr.run_reacher("PPO", "3.8", 1, root, "smoke", config=TINY_PPO)],
+        ("SVSL", "3.10"): [_train("SVSL", "3.10", 4, root, TINY_SVSL)],
+        ("PPO", "3.8"): [_train("PPO", "3.8", 1, root, TINY_PPO)],
     }
 
 
@@ -138,15 +199,16 @@ def test_svsl_is_scored_on_the_ppo_goals(tiny_runs: dict) -> None:
 @pytest.mark.slow
 def test_finished_runs_are_reused(tiny_runs: dict) -> None:
     root = tiny_runs["root"]
-    for key, method, reward, seed, config in (
-        (("SVSL", "3.10"), "SVSL", "3.10", 4, tiny_runs["svsl_config"]),
-        (("PPO", "3.8"), "PPO", "3.8", 1, TINY_PPO),
+    for method, reward, seed, overrides, env in (
+        ("SVSL", "3.10", 4, TINY_SVSL, "Reacher5Ch3"),
+        ("PPO", "3.8", 1, TINY_PPO, "Reacher5Ch3Step"),
     ):
-        path = tiny_runs[key][0]
-        assert path.parent == root and path.name.startswith(f"{method.lower()}-reacher5-ch3-s")
+        path = tiny_runs[(method, reward)][0]
+        assert path.parent == root
+        assert path.name.startswith(f"{method.lower()}-vslbook_{env}-v0-s{seed}-")
         files = [path / "metrics.jsonl", path / "DONE"]
         before = [f.stat().st_mtime_ns for f in files]
-        again = sr.run_reacher(method, reward, seed, root, "smoke", config=config)
+        again = _train(method, reward, seed, root, overrides)
         assert again == path
         assert [f.stat().st_mtime_ns for f in files] == before  # nothing rewritten
 
@@ -204,7 +266,7 @@ def test_fig_3_5_goes_logarithmic_only_where_returns_span_decades() -> None:
 @pytest.mark.slow
 def test_fig_3_5_from_the_command_line(tiny_runs: dict, monkeypatch) -> None:
     """`vslbook figure fig3-5` draws the runs `reacher_runs` returns for the budget (here the
-    module's tiny runs stand in for the smoke run set)."""
+    module's tiny runs stand in for the figure's smoke runs)."""
     import matplotlib.pyplot as plt
 
     from vslbook import figures

@@ -25,8 +25,8 @@ FIGURE, BUDGET = "fig4-4a", "smoke"
 FILES = ("runs.csv", "evals.csv.gz", "provenance.json", "registry.json")
 PROVENANCE_KEYS = {
     "method", "algo", "env", "seed", "budget", "config", "config_hash", "code_hash",
-    "code_hashes_verified", "code_excluded", "git_sha", "git_dirty", "packages", "hostname", "python", "platform",
-    "started", "wall_seconds", "wall_from", "metrics", "recorded",
+    "code_hashes_verified", "code_excluded", "git_sha", "git_dirty", "packages", "hostname",
+    "python", "platform", "started", "wall_seconds", "wall_from", "metrics", "recorded",
 }  # fmt: skip
 RESULT_KEYS = {"figure", "method", "task", "budget", "seeds", "metric", "iqm", "ci_low",
                "ci_high", "stale"}  # fmt: skip
@@ -272,7 +272,8 @@ def test_plan_marks_recorded_runs(root, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["record", "fig9-9"], "figure 'fig9-9' declares no runs; expected one of fig3-2, fig4-3b"),
+        (["record", "fig9-9"],
+         "figure 'fig9-9' declares no runs; expected one of fig3-1, fig3-2, fig3-5, fig4-3b"),
         (["record", FIGURE, "--budget", "huge"], "unknown budget 'huge'; expected one of"),
         (["record", FIGURE, "--root", "{file}"], "is not a folder; expected the folder that"),
         (["record", FIGURE, "--root", "{missing}"], "is not a folder; expected the folder"),

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 import torch
 
-import vslbook.srl.dime as dime_loop
+import vslbook.srl.dime_loop as dime_loop
 from vslbook.data import collect_runs, load_table
 from vslbook.experiments.dime_runs import run_variants
 from vslbook.results import DivergenceError, RunDir
@@ -85,8 +85,8 @@ def test_non_finite_parameter_is_caught_at_evaluation(tmp_path, monkeypatch):
             agent.policy.score_net.out.bias.fill_(float("inf"))
         return check(step, agent)
 
-    check = dime_loop._require_finite_parameters
-    monkeypatch.setattr(dime_loop, "_require_finite_parameters", corrupt_then_check)
+    check = dime_loop.require_finite_parameters
+    monkeypatch.setattr(dime_loop, "require_finite_parameters", corrupt_then_check)
     with pytest.warns(UserWarning, match="non-finite parameter policy.score_net.out.bias"):
         rd = run("dime", ENV, 1, "smoke", root=tmp_path, overrides=TINY, progress=False)
     assert rd.failure["step"] == 200

@@ -149,10 +149,10 @@ def _parser() -> argparse.ArgumentParser:
     pl = sub.add_parser(
         "plan", help="the state of every run a figure needs and the core-hours left",
         description="One line per run the figure draws: '<state> <run directory name>', "
-        "state done, partial (with progress), missing, failed or recorded, noting a run made "
-        "by other code (stale only if its first rows replay differently, checked when it is "
-        "resumed or recorded); then the core-hours still to train, from the per-iteration times the "
-        "runs in ROOT measured.",
+        "state done, partial (with progress), missing, failed or recorded, noting a run "
+        "made by other code (stale only if its first rows replay differently, checked when "
+        "it is resumed or recorded); then the core-hours still to train, from the "
+        "per-iteration times the runs in ROOT measured.",
     )  # fmt: skip
     pl.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
     pl.add_argument("--budget", default=None)

@@ -296,16 +296,17 @@ def draw_diskill_curves(
 
 def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
                  *, progress: bool = True) -> plt.Figure:  # fmt: skip
-    """Fig. 3.1 at a budget: SVSL with and without the responsibilities and HiREPS on the
-    planar reacher, seed 0 — the chosen experts' mean solutions at six targets and the
-    per-expert context distributions. Trains the ``03_svsl`` notebook's planar run set in
-    ``root`` where not finished (:mod:`vslbook.experiments.erl_run_sets`)."""
+    """Fig. 3.1 (Section 3.4.1) at a budget: SVSL with and without the responsibilities and
+    HiREPS on the planar reacher, seed 0 — the chosen experts' mean solutions at six targets and the
+    per-expert context distributions. Trains the figure's declared runs
+    (:func:`vslbook.experiments.ch3_runs.figure_runs`, as the ``03_svsl`` notebook does) in
+    ``root`` where not finished."""
     from vslbook.experiments import svsl_planar as P
-    from vslbook.experiments.erl_run_sets import RUN_SETS
+    from vslbook.experiments.ch3_runs import run_set
 
     b = get_budget(budget)
     use_style()
-    runs = RUN_SETS[3]["planar"](b, Path(root), progress)
+    runs = run_set("fig3-1", b, Path(root), progress=progress)
     n = P.planar_counts(b)
     fig, axes = plt.subplots(2, 3, figsize=(12, 8))
     for j, variant in enumerate(P.VARIANTS):
@@ -326,8 +327,10 @@ def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
 
 def draw_fig_3_5_runs(budget: Budget | str | None = None, root: str | Path = "runs",
                       *, progress: bool = True) -> plt.Figure:  # fmt: skip
-    """Fig. 3.5 at a budget: SVSL against PPO on the 5-link reacher with rewards 3.8-3.10.
-    Trains the ``03_svsl`` notebook's reacher run set in ``root`` where not finished."""
+    """Fig. 3.5 (Section 3.4.3) at a budget: SVSL against PPO on the 5-link reacher with the
+    rewards of Eqs. 3.8-3.10.
+    Trains the figure's declared runs (:func:`vslbook.experiments.ch3_runs.figure_runs`, as
+    the ``03_svsl`` notebook does) in ``root`` where not finished."""
     from vslbook.experiments import svsl_reacher as RE
 
     b = get_budget(budget)

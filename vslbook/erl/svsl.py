@@ -22,7 +22,10 @@ Algorithm 1 (Appendix A.2) is :func:`train`: N experts are added one by one; eac
 expert (and its context distribution) is trained for K iterations while the others stay
 fixed, except every H-th iteration, when all of them are updated; π(o) stays uniform
 meanwhile. Then π(o) is updated (``weight_iterations`` iterations, the authors' 100) and
-experts with π(o) below ``delete_threshold`` are removed.
+experts with π(o) below ``delete_threshold`` are removed. :func:`train` runs in memory and
+is resumable from an :class:`SVSL` state; in a run directory (checkpointed, resumed, reused
+when finished) SVSL is trained by ``vslbook run svsl`` / :func:`vslbook.training.run`
+(:mod:`vslbook.experiments.ch3_algorithms`).
 
 Each expert keeps a small replay buffer of its last ``buffer_size`` (c, θ, R) samples
 (A.2: "newly taken samples replace the oldest"); an expert's buffer is filled with fresh
@@ -45,7 +48,6 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -341,9 +343,6 @@ class SVSL:
 
 Callback = Callable[[int, dict[str, float]], None]
 
-#: Package paths an SVSL run cannot reach (left out of its recorded code fingerprint).
-CODE_EXCLUDE = ("srl/",)
-
 
 def train(
     task: EpisodicTask,
@@ -408,65 +407,3 @@ def train(
             checkpoint(s)
     return s
 
-
-def run(
-    task_name: str,
-    config: SVSLConfig,
-    seed: int,
-    root: str | Path,
-    *,
-    task_kwargs: dict[str, Any] | None = None,
-    progress: bool = False,
-    checkpoint_every: int = 50,
-    reuse_stale: bool | None = None,
-) -> Path:
-    """Train SVSL in a run directory (resumes from its checkpoint; see vslbook.results).
-
-    A finished run is reused only if the code it was made by is the code running now;
-    otherwise it is moved to ``root/_stale`` and trained afresh (``reuse_stale=True`` or
-    ``$VSLBOOK_REUSE_STALE=1`` reuses it with a warning), as :func:`vslbook.training.run`.
-
-    Writes ``config.json`` (the task, its arguments, the seed and every config field),
-    ``metrics.jsonl`` (one row per iteration), ``checkpoint/state.pt`` and ``DONE``.
-    Returns the run directory.
-    """
-    from vslbook.envs.robot import make_task
-    from vslbook.run_open import open_run
-
-    kwargs = dict(task_kwargs or {})
-    task = make_task(task_name, **kwargs)
-    record = {"algo": "svsl", "env": task_name, "task_kwargs": kwargs, "seed": int(seed)}
-    record |= asdict(config)
-    rd = open_run(root, record, code_exclude=CODE_EXCLUDE, reuse_stale=reuse_stale)
-    if rd.done:
-        rd.release()
-        return rd.path
-    s = SVSL(task, config, int(seed))
-    saved = rd.load_checkpoint()
-    if saved is not None:
-        s.load_state_dict(saved["svsl"])
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=config.total_iterations, initial=s.iteration, desc=f"svsl {task_name}")
-
-    def log(it: int, metrics: dict[str, float]) -> None:
-        rd.log(it, **metrics)
-        if bar is not None:
-            bar.update(1)
-
-    try:
-        train(
-            task, config, int(seed), state=s, callback=log,
-            checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
-            checkpoint_due=rd.checkpoint_due,
-            checkpoint_every=checkpoint_every,
-        )  # fmt: skip
-    finally:
-        if bar is not None:
-            bar.close()
-        task.close()
-    rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
-    rd.release()
-    return rd.path

@@ -1,7 +1,8 @@
 """The training behind the Chapter 3 and 4 notebooks, as named run sets.
 
 Each run set trains (or reuses, where finished) exactly the runs one notebook cell
-starts, through the same functions, so that the cost of a chapter at a budget can be
+starts, through the same functions (for Figs. 3.1, 3.5 and Chapter 4 the figure's declared
+runs, :mod:`vslbook.experiments.run_plan`), so that the cost of a chapter at a budget can be
 measured set by set (``benchmarks/erl_run_sets.py``) or the runs trained ahead of a
 ``make book``, e.g. one set per core. Chapter 5's run sets are
 :func:`vslbook.experiments.dime_runs.chapter5_run_sets`.
@@ -26,11 +27,9 @@ RunSet = Callable[[Budget, Path, bool], dict[str, list[Path]]]
 
 
 def _planar(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]:
-    from vslbook.experiments import svsl_planar as P
+    from vslbook.experiments.ch3_runs import run_set
 
-    n = P.planar_counts(budget)["seeds"]
-    return {v: [P.run_planar(v, s, root, budget, progress=progress) for s in range(n)]
-            for v in P.VARIANTS}  # fmt: skip
+    return run_set("fig3-1", budget, root, progress=progress)
 
 
 def _beer_pong(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]:

@@ -14,8 +14,8 @@ uses this one declaration:
   ``partial`` (and how far), ``missing``, ``failed`` or ``recorded`` (in
   ``data/results/``), noting a run made by other code (``code changed``: it is stale only
   if replaying its first rows gives other numbers, which ``vslbook run`` and ``vslbook
-  record`` check before they use it, moving a stale run to ``_stale/``), and estimates the core-hours left from the per-iteration times
-  the runs in the root measured.
+  record`` check before they use it, moving a stale run to ``_stale/``), and estimates
+  the core-hours left from the per-iteration times the runs in the root measured.
 
 Chapters registered here: 3 (Figs. 3.1, 3.2, 3.5, :mod:`vslbook.experiments.ch3_runs`) and
 4 (:mod:`vslbook.experiments.diskill_runs`).
@@ -176,8 +176,9 @@ def plan_text(rows: list[PlanRow]) -> str:
     core-hours left (one core per run) and how many runs have no time measured yet."""
     lines = []
     for row in rows:
-        notes = [f"{row.progress}/{row.run.length} {row.run.unit}"] if row.state == "partial" else []
-        notes += [row.note] if row.note else []
+        notes = [row.note] if row.note else []
+        if row.state == "partial":
+            notes.insert(0, f"{row.progress}/{row.run.length} {row.run.unit}")
         extra = f" ({'; '.join(notes)})" if notes else ""
         lines.append(f"{row.state:8s} {row.run.name}{extra}")
     todo = [r for r in rows if r.state in ("partial", "missing")]

@@ -54,6 +54,7 @@ import pandas as pd
 from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
+from vslbook.envs.robot import make_task
 from vslbook.erl import hireps, ladips
 from vslbook.erl.mixture_baseline import MixtureAlgorithm
 from vslbook.erl.svsl import SVSL, SVSLConfig
@@ -199,7 +200,8 @@ def _config_from(cls: type, cfg: dict[str, Any]) -> Any:
 
 
 def load_model(path: str | Path) -> Any:
-    """The trained SVSL, HiREPS or LaDiPS object stored in a run directory's checkpoint."""
+    """The trained SVSL, HiREPS or LaDiPS object stored in a run directory's checkpoint
+    (any Chapter 3 task; on the 5-link reacher with the run's reward, Eqs. 3.8-3.10)."""
     rd = RunDir.open(path)
     cfg = rd.config
     algo = cfg.get("algo")
@@ -216,8 +218,10 @@ def load_model(path: str | Path) -> Any:
     from vslbook.experiments.ch3_algorithms import SVSL_ENVS
 
     cls, config_cls, key = classes[algo]
-    task = SVSL_ENVS.get(cfg["env"], cfg["env"])  # an env id, or a task name (older runs)
-    model = cls(shared_task(task), _config_from(config_cls, cfg), int(cfg["seed"]))
+    name = SVSL_ENVS.get(cfg["env"], cfg["env"])  # an env id, or a task name (older runs)
+    reward = cfg.get("reward")
+    task = shared_task(name) if reward is None else make_task(name, reward=reward)
+    model = cls(task, _config_from(config_cls, cfg), int(cfg["seed"]))
     model.load_state_dict(state[key])
     return model
 

@@ -11,31 +11,30 @@ obstacles and the context distributions crowd into easy regions; HiREPS chose on
 60 experts.
 
 :func:`planar_counts` gives the counts per budget (a budget scales the number of experts,
-iterations and seeds; α, β, the KL bounds and K stay the thesis's), :func:`run_planar`
-trains one variant for one seed in a run directory (resumable), :func:`planar_scores`
-measures precision, validity and versatility of a trained model, and the ``draw_*``
-functions make the panels.
+iterations and seeds; α, β, the KL bounds and K stay the thesis's) and :func:`variant_config`
+each variant's configuration, the presets of ``vslbook run svsl|hireps --env
+vslbook/PlanarReacher-v0`` (:mod:`vslbook.experiments.ch3_algorithms`). The runs are
+declared in :mod:`vslbook.experiments.ch3_runs` (``fig3-1``; the variant without
+responsibilities is ``--set responsibilities=false``) and trained by
+:func:`vslbook.training.run`: ``run_set("fig3-1", budget, root)`` gives variant → run
+directories. :func:`load_model` reads a trained model back, :func:`planar_scores` measures
+precision, validity and versatility of it, and the ``draw_*`` functions make the panels.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict
-from pathlib import Path
 from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
 from matplotlib.patches import Ellipse, Rectangle
-from tqdm.auto import tqdm
 
 from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot import make_task
 from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points
 from vslbook.erl import hireps
-from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config
-from vslbook.erl.svsl import run as run_svsl
-from vslbook.experiments.erl_runs import open_run
-from vslbook.results import RunDir
+from vslbook.erl.svsl import SVSL, svsl_config
+from vslbook.experiments.svsl_mixtures import load_model
 
 __all__ = [
     "FIG_CONTEXTS",
@@ -46,7 +45,7 @@ __all__ = [
     "load_model",
     "planar_counts",
     "planar_scores",
-    "run_planar",
+    "variant_config",
     "ways_around_obstacles",
 ]
 
@@ -95,66 +94,6 @@ def variant_config(variant: str, budget: Budget | str | None = None) -> Any:
             "planar-reacher", n_experts=n["n_experts"], iterations=n["hireps_iterations"]
         )
     raise ValueError(f"unknown variant {variant!r}; expected one of {VARIANTS}")
-
-
-def run_planar(
-    variant: str, seed: int, root: str | Path, budget: Budget | str | None = None,
-    *, progress: bool = False,
-) -> Path:  # fmt: skip
-    """Train one variant for one seed in a run directory under ``root`` (reused if done);
-    ``progress``: a bar over the iterations."""
-    config = variant_config(variant, budget)
-    if isinstance(config, SVSLConfig):
-        return run_svsl("planar-reacher", config, seed, root, checkpoint_every=200,
-                        progress=progress)  # fmt: skip
-    return _run_hireps(config, seed, root, progress)
-
-
-def _run_hireps(
-    config: hireps.HiREPSConfig, seed: int, root: str | Path, progress: bool = False
-) -> Path:
-    record = {"algo": "hireps", "env": "planar-reacher", "seed": int(seed)} | asdict(config)
-    rd = open_run(root, record)
-    if rd.done:
-        return rd.path
-    algo = hireps.HiREPS(make_task("planar-reacher"), config, int(seed))
-    saved = rd.load_checkpoint()
-    done = 0
-    if saved is not None:
-        algo.load_state_dict(saved["hireps"])
-        done = int(saved["iteration"])
-    with tqdm(total=config.iterations, initial=done, disable=not progress,
-              desc=f"HiREPS planar-reacher s{seed}") as bar:  # fmt: skip
-        for i in range(done, config.iterations):
-            rd.log(i + 1, **algo.iteration())
-            bar.update(1)
-            if (i + 1) % 100 == 0 or i + 1 == config.iterations:
-                rd.save_checkpoint({"hireps": algo.state_dict(), "iteration": i + 1})
-    rd.mark_done({"iterations": config.iterations})
-    return rd.path
-
-
-def load_model(path: str | Path) -> Any:
-    """The trained SVSL or HiREPS object stored in a finished run directory."""
-    rd = RunDir.open(path)
-    cfg = rd.config
-    state = rd.load_checkpoint()
-    if state is None:
-        raise FileNotFoundError(f"{rd.path} has no checkpoint")
-    task = make_task(cfg["env"], **cfg.get("task_kwargs", {}))
-    if cfg["algo"] == "svsl":
-        fields = {k: v for k, v in cfg.items() if k in SVSLConfig.__dataclass_fields__}
-        tuples = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
-        s = SVSL(task, SVSLConfig(**tuples), int(cfg["seed"]))
-        s.load_state_dict(state["svsl"])
-        return s
-    if cfg["algo"] == "hireps":
-        fields = {k: v for k, v in cfg.items() if k in hireps.HiREPSConfig.__dataclass_fields__}
-        tuples = {k: tuple(v) if isinstance(v, list) else v for k, v in fields.items()}
-        h = hireps.HiREPS(task, hireps.HiREPSConfig(**tuples), int(cfg["seed"]))
-        h.load_state_dict(state["hireps"])
-        return h
-    raise ValueError(f"{rd.path}: not an SVSL or HiREPS run (algo {cfg['algo']!r})")
 
 
 def _sample_means(model: Any, contexts: np.ndarray, n: int, rng) -> tuple[np.ndarray, np.ndarray]:

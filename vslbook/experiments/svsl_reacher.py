@@ -10,9 +10,13 @@ optimum.
 
 :func:`reacher_counts` gives the counts per budget (a budget scales experts, iterations,
 PPO steps and seeds; α, β, β_w, the KL bounds, the sample sizes and every PPO setting stay
-the thesis's / the modules' own), :func:`run_reacher` trains one method on one reward for
-one seed in a run directory (resumable, a finished one is reused), :func:`reacher_curves`
-reads the runs into one long frame and :func:`draw_fig_3_5` draws the figure.
+the thesis's / the modules' own) and :func:`reacher_configs` the two methods'
+configurations, the presets of ``vslbook run svsl --env vslbook/Reacher5Ch3-v0 --set
+reward=R`` and ``vslbook run ppo --env vslbook/Reacher5Ch3Step-v0 --set reward=R``
+(:mod:`vslbook.experiments.ch3_algorithms`). The runs are declared in
+:mod:`vslbook.experiments.ch3_runs` (``fig3-5``) and trained by :func:`vslbook.training.run`;
+:func:`reacher_runs` trains (or reuses) them, :func:`reacher_curves` reads them into one
+long frame and :func:`draw_fig_3_5` draws the figure.
 
 Evaluation on one scale. Both methods are scored with the thesis's own, un-normalised
 return (Eq. 3.8 / 3.9 / 3.10 summed over the T = 200 steps) on the same fixed goals,
@@ -38,7 +42,7 @@ about −1.2·10⁵ (see :mod:`vslbook.envs.robot.reacher5`).
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
-from dataclasses import asdict, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -46,14 +50,11 @@ import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
 from matplotlib.figure import Figure
-from tqdm.auto import tqdm
 
 from vslbook.budget import Budget, get_budget
-from vslbook.envs.robot import make_task
 from vslbook.envs.robot.reacher5 import CH3_REWARDS, N_STEPS
-from vslbook.erl.ppo import EVAL_GOAL_SEED, PPOConfig, evaluation_goals, train_ppo
-from vslbook.erl.svsl import SVSL, SVSLConfig, svsl_config, train
-from vslbook.experiments.erl_runs import open_run
+from vslbook.erl.ppo import PPOConfig
+from vslbook.erl.svsl import SVSLConfig, svsl_config
 from vslbook.results import RunDir
 
 __all__ = [
@@ -66,7 +67,6 @@ __all__ = [
     "reacher_counts",
     "reacher_curves",
     "reacher_runs",
-    "run_reacher",
 ]
 
 #: The two methods of Fig. 3.5.
@@ -160,125 +160,22 @@ def reacher_configs(
 # -- runs ---------------------------------------------------------------------------------
 
 
-def _run_svsl(
-    reward: str, config: SVSLConfig, seed: int, root: str | Path, progress: bool = False
-) -> Path:
-    """Algorithm 1 on the reacher in a run directory, tested on the shared evaluation goals.
-
-    The directory is :func:`vslbook.erl.svsl.run`'s layout (config.json, metrics.jsonl,
-    checkpoint, DONE), so :func:`vslbook.experiments.svsl_planar.load_model` reads it; its
-    record adds ``test_goals`` because the test contexts are
-    ``evaluation_goals(config.test_contexts)`` instead of SVSL's own draw.
-    """
-    task = make_task(_TASK, reward=reward)
-    record = {"algo": "svsl", "env": _TASK, "task_kwargs": {"reward": reward}, "seed": int(seed)}
-    record |= asdict(config)
-    record["test_goals"] = f"ppo.evaluation_goals(seed={EVAL_GOAL_SEED})"
-    rd = open_run(root, record)
-    if rd.done:
-        return rd.path
-    s = SVSL(task, config, int(seed))
-    s.test_contexts = evaluation_goals(config.test_contexts)
-    saved = rd.load_checkpoint()
-    if saved is not None:
-        s.load_state_dict(saved["svsl"])
-    bar = tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
-               desc=f"SVSL Eq. {reward} s{seed}")  # fmt: skip
-
-    def log(it: int, metrics: dict[str, float]) -> None:
-        rd.log(it, **metrics)
-        bar.update(1)
-
-    try:
-        train(
-            task, config, int(seed), state=s, callback=log,
-            checkpoint=lambda st: rd.save_checkpoint({"svsl": st.state_dict()}),
-            checkpoint_due=rd.checkpoint_due,
-            checkpoint_every=max(config.test_every, 50),
-        )  # fmt: skip
-    finally:
-        bar.close()
-        task.close()
-    rd.mark_done({"samples": s.samples, "experts": s.model.n_experts})
-    return rd.path
-
-
-def _run_ppo(
-    reward: str, config: PPOConfig, seed: int, root: str | Path, eval_every: int, eval_goals: int,
-    progress: bool = False,
-) -> Path:  # fmt: skip
-    """PPO (Table A.5) in its own run directory ``ppo-reacher5-ch3-s{seed}-{hash}``.
-
-    :func:`vslbook.erl.ppo.train_ppo` checkpoints into the directory (and resumes from it);
-    its evaluation rows go to ``metrics.jsonl`` once the run has finished, then ``DONE``.
-    """
-    record = {
-        "algo": "ppo", "env": _TASK, "task_kwargs": {"reward": reward}, "seed": int(seed),
-        "eval_every": int(eval_every), "eval_episodes": int(eval_goals), **asdict(config),
-    }  # fmt: skip
-    rd = open_run(root, record)
-    if rd.done:
-        return rd.path
-    rows = train_ppo(
-        reward, config, int(seed), run_dir=rd.path, eval_every=eval_every,
-        eval_episodes=eval_goals, progress=progress,
-    )  # fmt: skip
-    logged = len(rd.metrics())  # a crash between logging and DONE: do not log twice
-    for i, row in enumerate(rows[logged:], start=logged):
-        rd.log(i, **row)
-    rd.mark_done({"env_steps": rows[-1]["env_steps"], "episodes": rows[-1]["episodes"]})
-    return rd.path
-
-
-def run_reacher(
-    method: str,
-    reward: str,
-    seed: int,
-    root: str | Path,
-    budget: Budget | str | None = None,
-    *,
-    config: SVSLConfig | PPOConfig | None = None,
-    progress: bool = False,
-) -> Path:
-    """Train ``method`` ("SVSL" or "PPO") on Eq. ``reward`` for one seed under ``root``.
-
-    A finished run directory with the same configuration is reused; an interrupted one
-    resumes. ``config`` replaces the budget's configuration of that method (e.g. a tiny
-    one for tests); the evaluation goals and schedule still come from ``budget``.
-    ``progress``: a bar over the iterations (SVSL) or environment steps (PPO).
-    """
-    method, reward = _check_method(method), _check_reward(reward)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    svsl_cfg, ppo_cfg = reacher_configs(reward, budget)
-    n = reacher_counts(budget)
-    if method == "SVSL":
-        if config is not None and not isinstance(config, SVSLConfig):
-            raise ValueError(f"config for SVSL must be an SVSLConfig, got {type(config).__name__}")
-        return _run_svsl(reward, config or svsl_cfg, int(seed), root, progress)
-    if config is not None and not isinstance(config, PPOConfig):
-        raise ValueError(f"config for PPO must be a PPOConfig, got {type(config).__name__}")
-    cfg = config or ppo_cfg
-    eval_every = max(cfg.n_rollout_steps, n["ppo_eval_every"] // cfg.n_rollout_steps
-                     * cfg.n_rollout_steps)  # fmt: skip
-    return _run_ppo(reward, cfg, int(seed), root, eval_every, n["eval_goals"], progress)
-
-
 def reacher_runs(
     root: str | Path, budget: Budget | str | None = None, *, progress: bool = False
 ) -> dict[tuple[str, str], list[Path]]:
-    """All runs of Fig. 3.5 at a budget (trained, or reused where finished), in sequence;
+    """All runs of Fig. 3.5 at a budget, trained (or reused where finished) in ``root``:
+    ``(method, reward)`` → run directories in seed order.
+
+    The runs are ``fig3-5``'s declaration (:func:`vslbook.experiments.ch3_runs.figure_runs`),
+    each what ``vslbook run svsl --env vslbook/Reacher5Ch3-v0 --set reward=R`` or ``vslbook
+    run ppo --env vslbook/Reacher5Ch3Step-v0 --set reward=R`` trains at the budget;
     ``progress``: a bar per run."""
-    n = reacher_counts(budget)
+    from vslbook.experiments.ch3_runs import figure_runs
+
     out: dict[tuple[str, str], list[Path]] = {}
-    for reward in REWARDS:
-        for method in METHODS:
-            if method == "PPO" and reward not in n["ppo_rewards"]:
-                continue
-            out[(method, reward)] = [
-                run_reacher(method, reward, seed, root, budget, progress=progress)
-                for seed in range(n["seeds"])
-            ]
+    for run in figure_runs("fig3-5", budget):
+        key = (run.algo.upper(), run.overrides["reward"])
+        out.setdefault(key, []).append(run.train(root, progress=progress))
     return out
 
 
