@@ -15,26 +15,30 @@ from vslbook.experiments import svsl_table_tennis as T  # noqa: E402
 from vslbook.results import RunDir  # noqa: E402
 
 
-def test_full_budget_counts_are_the_thesis():
+def test_full_budget_counts_are_the_authors():
     n = T.table_tennis_counts("full")
-    assert (n["n_experts"], n["iterations_per_expert"], n["fine_tune_every"]) == (50, 800, 50)
+    # K = 1000 as in the authors' configuration; Table A.1's 800 under settings="thesis"
+    assert (n["n_experts"], n["iterations_per_expert"], n["fine_tune_every"]) == (50, 1000, 50)
+    assert T.table_tennis_counts("full", settings="thesis")["iterations_per_expert"] == 800
+    with pytest.raises(ValueError, match="settings must be one of \\('code', 'thesis'\\), got 'x'"):
+        T.table_tennis_counts("full", settings="x")
     assert n["seeds"] == 20
     assert (n["entropy_contexts"], n["entropy_draws"]) == (1600, 1000)  # A.3.3.1
     s = T.method_config("SVSL", "full")
     assert (s.alpha, s.beta, s.beta_w, s.n_experts, s.iterations_per_expert) == (
-        1e-5, 0.2, 0.2, 50, 800,
-    )  # Table A.1  # fmt: skip
+        1e-5, 0.2, 0.2, 50, 1000,
+    )  # Table A.1, K from the authors' code  # fmt: skip
     h = T.method_config("HiREPS", "full")
     assert (h.eps, h.kappa, h.n_experts) == (0.3, 0.9, 50)  # Table A.2
     la = T.method_config("LaDiPS", "full")
     assert (la.eps, la.eps_gating, la.n_experts) == (0.01, 0.02, 50)  # Table A.3
     assert la.alpha == pytest.approx(math.log(30))
-    # SVSL's episodes by hand: 50 buffer fills of 567, 50·800 updates of the newest expert
+    # SVSL's episodes by hand: 50 buffer fills of 567, 50·1000 updates of the newest expert
     # (226 + 8 episodes each), every 50th iteration also the k - 1 older experts
-    # (16 times per added expert, 0 + 1 + ... + 49 = 1225 older experts in all), the
+    # (20 times per added expert, 0 + 1 + ... + 49 = 1225 older experts in all), the
     # weight phase refills 50 buffers.
-    episodes = 50 * 567 + 50 * 800 * 234 + 16 * 234 * 1225 + 50 * 567
-    assert T.svsl_episodes(s) == episodes == 14_003_100
+    episodes = 50 * 567 + 50 * 1000 * 234 + 20 * 234 * 1225 + 50 * 567
+    assert T.svsl_episodes(s) == episodes == 17_489_700
     for cfg in (h, la):
         assert cfg.samples_per_iteration == 500
         assert 0 <= cfg.iterations * 500 - episodes < 500

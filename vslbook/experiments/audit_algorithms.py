@@ -115,7 +115,8 @@ def _svsl_rows() -> list[Setting]:
                 "both agree"
                 if thesis == code
                 else (
-                    "thesis (Table A.1 K = 800; the code trains 1000)"
+                    "code (table_tennis_counts(settings=\"thesis\") or --set "
+                    "iterations_per_expert=800 gives Table A.1's K)"
                     if attr == "iterations_per_expert"
                     else _CODE
                 )

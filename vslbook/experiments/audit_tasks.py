@@ -485,7 +485,7 @@ TASK_SETTINGS: list[Setting] = [
              _const("planar_reacher", "OBSTACLES"), _CODE),
             ("joint penalty leaves out the base joint", False, "A.3.1 (−‖θ‖²)", True,
              _SV + "contextual_environments/PlanarRobotObstacle_2dim_ctxt.py l.245",
-             "exclude_base_joint", "thesis (exclude_base_joint=True gives the code's)"),
+             "exclude_base_joint", "code (exclude_base_joint=False gives the thesis's)"),
             ("weights: distance, collision, context", (2.0, 3.0, 10.0), "A.3.1", (2.0, 3.0, 10.0),
              _SV + "contextual_environments/PlanarRobotObstacle_2dim_ctxt.py l.432-435",
              _consts("planar_reacher", "DISTANCE_WEIGHT", "COLLISION_COST", "CONTEXT_COST"),

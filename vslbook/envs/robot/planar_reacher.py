@@ -30,8 +30,8 @@ Reward (A.3.1):
     R(θ, c) = −‖wrap(θ)‖² − 2‖f(θ) − c‖² − l_c(c) − l_o(θ),
     l_c(c) = 10 if c ∉ C else 0,   l_o(θ) = 3 if any link collides else 0.
     ⚠ The authors' code leaves the first (base) joint out of the joint penalty
-    (−‖wrap(θ_2:10)‖²); the default follows the thesis, ``exclude_base_joint=True`` gives the
-    code's version.
+    (−‖wrap(θ_2:10)‖²). The code drew Fig. 3.1, so that is the default
+    (``exclude_base_joint=True``); ``exclude_base_joint=False`` gives the thesis's −‖θ‖².
 
 Contexts outside C (SVSL's context Gaussians can sample them): unlike the simulated tasks,
     where the base class gives such a context only a penalty and does not run it, here the
@@ -146,7 +146,7 @@ class PlanarReacherTask(EpisodicTask):
 
     Args:
         exclude_base_joint: leave the first joint out of the joint penalty, as the
-            authors' code does (default False: the thesis's −‖θ‖², A.3.1).
+            authors' code does (default True; False: the thesis's −‖θ‖², A.3.1).
     """
 
     name: ClassVar[str] = "planar-reacher"
@@ -163,7 +163,7 @@ class PlanarReacherTask(EpisodicTask):
     )
     has_success: ClassVar[bool] = False
 
-    def __init__(self, exclude_base_joint: bool = False, **kwargs: Any) -> None:
+    def __init__(self, exclude_base_joint: bool = True, **kwargs: Any) -> None:
         if not isinstance(exclude_base_joint, (bool, np.bool_)):
             raise TypeError(f"exclude_base_joint must be a bool, got {exclude_base_joint!r}")
         super().__init__(exclude_base_joint=bool(exclude_base_joint), **kwargs)
