@@ -95,12 +95,14 @@
 # | [4.6](#eq-4-6) energy-based $\pi(c\mid o)$, Bayes gating | 4 §3 | Monte-Carlo normaliser against quadrature in 1-D and 2-D; gating from batch-normalised categoricals | `test_bounds_diskill.py::test_normaliser_and_entropy_against_the_trapezoid_rule` |
 # | [4.7](#eq-4-7) trust-region projection | 4 §4 | KL within its bounds after projection, the identity inside | `test_erl_trpl.py::test_bounds_hold_on_random_gaussians`, `test_gradcheck_project_cov` |
 # | [4.8](#eq-4-8) sample form of the context objective | 4 §5 | Eq. 4.8 over samples of $p(c)$ against Eq. 4.5 by quadrature | `test_bounds_diskill.py::test_wrong_sample_objectives_fail` |
+# | [5.9](#eq-5-9)–5.10 denoising score matching | 5 §1 | the average conditional score is the marginal score; Eq. 5.9 minus the explicit loss is a constant; the fitted score against the exact one | `test_bounds_dime_bridges.py::test_minimiser_of_eq_5_9_over_affine_scores_is_the_marginal_score` |
 # | [C.1](#eq-C-1)–[C.3](#eq-C-3), [5.15](#eq-5-15) entropy lower bound | 5 §1.2 | Monte-Carlo and closed-form $\ell\le\mathcal H$ on a linear-Gaussian chain; the gap equals the chains' KL | `test_bounds_dime.py::test_wrong_bound_estimator_fails` |
 # | [C.29](#eq-C-29)–[C.30](#eq-C-30) tanh correction | 5 §1.3 | squashed entropy by quadrature against $\ell$ plus the log-Jacobian | `test_srl_components.py::test_squash_adds_tanh_correction_to_running_cost` |
 # | [5.16](#eq-5-16)–[5.20](#eq-5-20), [C.11](#eq-C-11) the inference problem | 5 §1.4 | joint KL $=-\mathbb E[Q]-\ell+\log Z$; marginal KL below joint KL | `test_bounds_dime.py::test_check_passes` |
 # | [5.21](#eq-5-21), Prop. 5.4.1 policy evaluation | 5 §2 | the backup with $\alpha\ell$ contracts at rate $\gamma$ to the series of Eq. 5.17 | `test_bounds_dime_policy_iteration.py::test_wrong_sign_of_the_bound_in_the_backup_fails_prop_541` |
 # | [5.22](#eq-5-22), Prop. 5.4.2 policy improvement | 5 §2 | $Q_{\rm new}\ge Q_{\rm old}$ everywhere; the step beats random members of the family | `test_bounds_dime_policy_iteration.py::test_improvement_away_from_the_target_fails_prop_542` |
 # | Prop. 5.4.3 policy iteration | 5 §2 | monotone, ends at the family's optimum found by value iteration | `test_bounds_dime_policy_iteration.py::test_no_improvement_is_monotone_but_not_optimal` |
+# | [5.29](#eq-5-29)–[5.38](#eq-5-37) general bridges | 5 §5c | ℓ and Eq. 5.37 by Monte Carlo against exact values (affine, 2-D) and grid quadrature (double well, 1-D); DIME and the library's policy as special cases | `test_bounds_dime_bridges.py::test_transfer_quadrature_against_brute_force_grid`, `test_policy_bridge_reproduces_the_library_entropy_bound` |
 # | [5.24](#eq-5-24)–[5.28](#eq-5-28) practical losses | 5 §2b | critic, actor and $\alpha$ losses of a tiny agent against the formulas computed in the cell | `test_dime_update_maths.py::test_actor_loss_and_gradient_follow_eq_5_27` |
 
 # %% [markdown]

@@ -56,7 +56,7 @@ def test_check_passes(check, seed):
 
 def test_dime_checks_and_determinism():
     reports = D.dime_checks(1)
-    assert len(reports) == 4 and all(r.passed for r in reports)
+    assert len(reports) == 8 and all(r.passed for r in reports)
     again = D.dime_checks(1)
     for a, b in zip(reports, again, strict=True):
         assert [c.lhs for c in a] == [c.lhs for c in b]

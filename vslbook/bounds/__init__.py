@@ -10,8 +10,9 @@ them; a test calls :meth:`Check.require` or :meth:`CheckReport.require`.
                  (experts, context distributions, weights), the REPS update of the weights
 ``diskill``      Chapter 4: the same bounds with energy-based context distributions, their
                  sample form (Eq. 4.8), the energy normaliser and the gating
-``dime``         Chapter 5: the entropy lower bound of a diffusion policy and its gap, the soft
-                 Bellman contraction, soft policy iteration
+``dime``         Chapter 5: denoising score matching, the entropy lower bound of a diffusion
+                 policy and its gap, the soft Bellman contraction, soft policy iteration, general
+                 bridges and DIME as their special case
 """
 
 from __future__ import annotations

@@ -20,6 +20,17 @@ The checks live in one module per section of the thesis; this module re-exports 
   the exact entropy of a discrete policy (SAC's soft policy iteration, no diffusion chain), and
   :mod:`vslbook.bounds.dime_policy_iteration` with the diffusion policies of Section 5.4.1 and
   the bound ``ℓ`` on a linear-quadratic problem (:func:`check_diffusion_policy_iteration`).
+* :mod:`vslbook.bounds.dime_score_matching`, Section 5.3.2: the denoising score-matching loss of
+  Eq. 5.9 and the denoising process of Eq. 5.10 it trains, on a Gaussian-mixture target
+  (:func:`check_score_matching`).
+* Section 5.6, general bridges (Eqs. 5.29-5.38): the bridge, its samplers and estimators in
+  :mod:`vslbook.bounds.dime_bridges`, closed forms for affine drifts in
+  :mod:`vslbook.bounds.dime_bridges_linear`, and the checks in
+  :mod:`vslbook.bounds.dime_bridges_checks`: against closed forms
+  (:func:`check_general_bridge`) and against quadrature with nonlinear drifts
+  (:func:`check_bridge_quadrature`); and in :mod:`vslbook.bounds.dime_bridges_special`,
+  DIME (thesis notation and the library's ``DiffusionPolicy``, with and without
+  ``general_bridges``) as the special case (:func:`check_dime_as_bridge`).
 
 Every check runs in about a second or less on one CPU thread.
 """
@@ -27,6 +38,26 @@ Every check runs in about a second or less on one CPU thread.
 from __future__ import annotations
 
 from vslbook.bounds import CheckReport
+from vslbook.bounds.dime_bridges import (
+    GeneralBridge,
+    bridge_kl_samples,
+    dime_bridge,
+    entropy_bound_samples,
+    log_backward_joint,
+    log_forward_conditional,
+    make_bridge,
+    policy_bridge,
+    sample_backward,
+    sample_forward,
+)
+from vslbook.bounds.dime_bridges_checks import check_bridge_quadrature, check_general_bridge
+from vslbook.bounds.dime_bridges_linear import (
+    LinearBridge,
+    affine_map,
+    linear_bridge_closed_form,
+    linear_sde_moments,
+)
+from vslbook.bounds.dime_bridges_special import check_dime_as_bridge
 from vslbook.bounds.dime_entropy import (
     AffineScore,
     LinearGaussianChain,
@@ -36,6 +67,12 @@ from vslbook.bounds.dime_entropy import (
     linear_gaussian_policy,
 )
 from vslbook.bounds.dime_policy_iteration import check_diffusion_policy_iteration
+from vslbook.bounds.dime_score_matching import (
+    OUProcess,
+    check_score_matching,
+    mixture_log_density_and_score,
+    score_matching_loss,
+)
 from vslbook.bounds.dime_tabular import (
     check_soft_bellman_contraction,
     check_soft_policy_iteration,
@@ -46,17 +83,38 @@ from vslbook.bounds.dime_tabular import (
 
 __all__ = [
     "AffineScore",
+    "GeneralBridge",
+    "LinearBridge",
     "LinearGaussianChain",
+    "OUProcess",
+    "affine_map",
+    "bridge_kl_samples",
+    "check_bridge_quadrature",
     "check_diffusion_policy_iteration",
+    "check_dime_as_bridge",
     "check_entropy_lower_bound",
+    "check_general_bridge",
+    "check_score_matching",
     "check_soft_bellman_contraction",
     "check_soft_policy_iteration",
+    "dime_bridge",
     "dime_checks",
+    "entropy_bound_samples",
     "gaussian_entropy",
+    "linear_bridge_closed_form",
     "linear_gaussian_chain",
     "linear_gaussian_policy",
+    "linear_sde_moments",
+    "log_backward_joint",
+    "log_forward_conditional",
+    "make_bridge",
     "mirror_step",
+    "mixture_log_density_and_score",
+    "policy_bridge",
     "policy_entropy",
+    "sample_backward",
+    "sample_forward",
+    "score_matching_loss",
     "soft_bellman_operator",
 ]
 
@@ -64,8 +122,12 @@ __all__ = [
 def dime_checks(seed: int = 0) -> list[CheckReport]:
     """Run every Chapter 5 check with default settings (about a second or less each)."""
     return [
+        check_score_matching(seed),
         check_entropy_lower_bound(seed),
         check_soft_bellman_contraction(seed),
         check_soft_policy_iteration(seed),
         check_diffusion_policy_iteration(seed),
+        check_general_bridge(seed),
+        check_bridge_quadrature(seed),
+        check_dime_as_bridge(seed),
     ]
