@@ -390,6 +390,7 @@ from pathlib import Path
 
 from vslbook.experiments import svsl_planar as P
 from vslbook.experiments.ch3_runs import figure_runs, run_set
+from vslbook.experiments.ch3_settings import settings_phrase
 from vslbook.plots import interval_plot
 from vslbook.stats import interval_estimates
 
@@ -410,9 +411,11 @@ for j, variant in enumerate(P.VARIANTS):
     axes[0, j].set_title(f"{variant}: mean solutions (seed 0)")
     P.draw_context_coverage(axes[1, j], models[variant][0])
     axes[1, j].set_title("context distributions")
+planar_settings = settings_phrase("planar-reacher")  # read from the runs' task object
+print("settings:", planar_settings)
 fig.suptitle(
     f"Fig. 3.1 (ours, budget {budget.name}: {counts['n_experts']} experts, seed 0 of "
-    f"{counts['seeds']}; thesis: 60 experts, best of 15 seeds)",
+    f"{counts['seeds']}; thesis: 60 experts, best of 15 seeds)\n{planar_settings}",
     fontsize=10,
 )
 fig.tight_layout()
@@ -497,7 +500,7 @@ for ax_row, (reading, keys) in zip(axes, reading_keys.items(), strict=True):
     ax_row[0].set_title(reading, loc="left", fontsize=9)
 fig.suptitle(
     f"Fig. 3.1 scores (ours, budget {budget.name}: {counts['n_experts']} experts, "
-    f"{counts['seeds']} seeds; thesis: 60 experts, 15 seeds)",
+    f"{counts['seeds']} seeds; thesis: 60 experts, 15 seeds)\n{planar_settings}",
     fontsize=10,
 )
 fig.tight_layout()
@@ -570,7 +573,8 @@ axes[1, 2].set_title("(g) SVSL: ball height, cup at (0, -1.7)")
 fig.suptitle(
     f"Fig. 3.2 beer pong and Fig. A.1 (ours, budget {budget.name}: SVSL N = "
     f"{bp_counts['n_experts']}, K = {bp_counts['iterations_per_expert']}, "
-    f"{bp_counts['seeds']} seed(s); thesis: N = 70, K = 750, 20 seeds)", fontsize=10,
+    f"{bp_counts['seeds']} seed(s); thesis: N = 70, K = 750, 20 seeds)\n"
+    f"{settings_phrase('beer-pong')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
          ("curves", "coverage", "success", "trajectories", "entropy")),
@@ -635,6 +639,9 @@ for reward, rows in finals.groupby("reward", sort=False):
 # **The thesis's outcome** (50 experts, 20 seeds): SVSL covers the context space and
 # outperforms HiREPS and LaDiPS in reward, with the highest expected mixture entropy.
 # **Ours**: the counts printed below; at `reduced` SVSL has 2 of the thesis's 50 experts.
+# The task punishes out-of-range contexts and durations and plans outside the joint limits
+# as the authors' code does (`make_task("table-tennis-ch3", settings="thesis")` gives
+# A.3.3's formulas); the figure's title names the settings.
 
 # %%
 from vslbook.experiments import svsl_table_tennis as TT
@@ -657,7 +664,8 @@ axes[3].set_title("(d) SVSL, incoming-ball plane (seed 0)")
 fig.suptitle(
     f"Fig. 3.2 table tennis and Fig. A.2 (ours, budget {budget.name}: SVSL N = "
     f"{tt_counts['n_experts']}, K = {tt_counts['iterations_per_expert']}, "
-    f"{tt_counts['seeds']} seed(s); thesis: N = 50, K = 800, 20 seeds)", fontsize=10,
+    f"{tt_counts['seeds']} seed(s); thesis: N = 50, K = 800, 20 seeds)\n"
+    f"{settings_phrase('table-tennis-ch3')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(TT.THESIS_OUTCOME[k] for k in ("curves", "coverage", "entropy")),
          fontsize=8, color="#555555", va="top")  # fmt: skip
@@ -686,7 +694,8 @@ fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
 TT.draw_fig_3_3(axes, c33, strikes)
 fig.suptitle(
     f"Fig. 3.3 (ours, budget {budget.name}, SVSL with {TT.mixture_of(tt_svsl).n_experts} "
-    f"expert(s); thesis: 50): strikes for c = {np.array2string(c33, precision=2)}",
+    f"expert(s); thesis: 50): strikes for c = {np.array2string(c33, precision=2)}\n"
+    f"{settings_phrase('table-tennis-ch3')}",
     fontsize=10,
 )
 fig.tight_layout()

@@ -65,6 +65,25 @@ def test_box_pushing_follows_the_code_and_the_thesis_settings_the_text() -> None
     assert (limits["ours"], limits["ours = code"]) == ("True", False)
 
 
+def test_table_tennis_ch3_punishments_follow_the_code_and_the_thesis_settings_a33() -> None:
+    """The three punishments of the Chapter 3 table tennis are read from the task: the
+    authors' SVSL code's by default, A.3.3's with settings="thesis"."""
+    fields = ("context out-of-range punishment",
+              "duration punishment (l outside [0.1, 5] s, b the bound)",
+              "joint-limit punishment (planned q_d outside the joint box)")  # fmt: skip
+    code = audit.task_audit()
+    thesis = audit.task_audit({"table-tennis-ch3": {"settings": "thesis"}})
+    for field in fields:
+        row = _row(code, "table-tennis-ch3", field)
+        assert (row["ours = code"], row["ours = thesis"]) == (True, False), field
+        assert row["choice and why"].startswith("code") and "settings=" in row["choice and why"]
+        assert row["ours read from"].startswith("task.")
+        other = _row(thesis, "table-tennis-ch3", field)
+        assert (other["ours = code"], other["ours = thesis"]) == (False, True), field
+    assert _row(code, "table-tennis-ch3", fields[1])["ours"] == "-3|l - b| - 1"
+    assert _row(thesis, "table-tennis-ch3", fields[1])["ours"] == "-3|l - b|"
+
+
 def test_ours_follows_the_configs() -> None:
     field = "samples per expert"
     before = _row(audit.algorithm_audit(4), "diskill/hopper-jump", field)  # the code's preset

@@ -96,6 +96,9 @@ def test_fig_3_1_from_the_command_line(tmp_path, monkeypatch):
     fig = figures.draw_fig_3_1("smoke", tmp_path / "runs", progress=False)
     assert len(fig.axes) == 6
     assert "2 experts, K = 50 of 350, seed 0 of 1" in fig._suptitle.get_text()
+    # the settings, read from the runs' task: the authors' joint cost (Fig. 3.1 was theirs)
+    assert ("the authors' settings (SVSL_LMOE code): joint cost without the base joint"
+            in fig._suptitle.get_text())  # fmt: skip
     plt.close(fig)
 
 

@@ -261,6 +261,9 @@ def test_fig_3_5_goes_logarithmic_only_where_returns_span_decades() -> None:
     curves = pd.DataFrame(rows, columns=["method", "reward", "seed", "episodes", "return"])
     fig = sr.draw_fig_3_5(curves, "smoke")
     assert [ax.get_yscale() for ax in fig.axes[:3]] == ["linear", "linear", "symlog"]
+    # the title names the settings: the thesis's, as the 5-link reacher has no public code
+    assert ("ours: the thesis's settings (no public code for the 5-link reacher)"
+            in fig._suptitle.get_text())  # fmt: skip
 
 
 @pytest.mark.slow

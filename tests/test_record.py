@@ -17,7 +17,13 @@ import pytest
 
 from vslbook.cli import main
 from vslbook.data import register_file
-from vslbook.experiments.record import load_recorded, recorded_dir, recorded_names
+from vslbook.experiments.record import (
+    figure_metric,
+    load_recorded,
+    recorded_dir,
+    recorded_names,
+    result_rows,
+)
 from vslbook.experiments.run_plan import figure_runs
 from vslbook.results import RunDir
 
@@ -337,3 +343,38 @@ def test_verify_replays_changed_runs_and_keeps_equal_ones_current(root, capsys):
     assert [r["stale"] for r in _results(capsys)] == [False, True, False]
     kept = json.loads((directory / "provenance.json").read_text())["runs"][runs[0].name]
     assert kept["code_hash"] == "f" * 64 and len(kept["code_hashes_verified"]) == 1
+
+
+def test_figure_metric_names_one_metric_per_algorithm_where_they_log_it_differently():
+    """Fig. 3.5's return is SVSL's ``test_return`` and PPO's ``eval_return`` (the same
+    un-normalised return on the same goals); the other figures name one metric."""
+    assert figure_metric("fig3-5", "svsl") == "test_return"
+    assert figure_metric("fig3-5", "ppo") == "eval_return"
+    assert figure_metric("fig3-2") == figure_metric("fig3-2", "ppo") == "test_success"
+    assert figure_metric(FIGURE) == "test_return"
+    for algo in (None, "hireps"):
+        with pytest.raises(ValueError, match="one metric per algorithm"):
+            figure_metric("fig3-5", algo)
+
+
+@pytest.mark.slow
+def test_fig_3_5_results_have_a_value_for_svsl_and_ppo(tmp_path, monkeypatch, capsys):
+    """One smoke run of each algorithm of Fig. 3.5 (reward Eq. 3.8): each logs the metric
+    the figure names for it, and ``vslbook results`` gives both methods their final value."""
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    root = tmp_path / "runs"
+    runs = [r for r in figure_runs("fig3-5", BUDGET) if r.method.endswith("Eq. 3.8")]
+    assert sorted(r.algo for r in runs) == ["ppo", "svsl"]
+    finals = {}
+    for r in runs:
+        r.train(root)
+        finals[r.method] = _final(root / r.name, figure_metric("fig3-5", r.algo))
+    capsys.readouterr()
+    assert main(["record", "fig3-5", "--budget", BUDGET, "--root", str(root)]) == 0
+    rows = {r["method"]: r for r in result_rows(["fig3-5"]) if r["method"] in finals}
+    assert set(rows) == set(finals)
+    for method, final in finals.items():
+        row = rows[method]
+        assert row["seeds"] == 1 and row["iqm"] == final, row
+        assert row["metric"] == ("eval_return" if method.startswith("PPO") else "test_return")

@@ -58,6 +58,14 @@ def task():
     t.close()
 
 
+@pytest.fixture(scope="module")
+def tasks(task):
+    """settings -> task: the authors' punishments (default) and A.3.3's."""
+    t = TableTennisCh3(settings="thesis")
+    yield {"code": task, "thesis": t}
+    t.close()
+
+
 def x_inc_max() -> float:
     """Independent serve limit: the ball (z above the table 1.08, v = (2.5, 0, 0.5)) must land
     before the table's end at x = 1.1."""
@@ -112,7 +120,10 @@ def test_context_order_and_ranges(task):
     assert not task.context_valid([-0.6, 0.0, -0.5, 0.62])  # in the box, |y_inc| > 0.6
 
 
-def test_out_of_range_context_is_penalised_with_minus_20_d_squared(task):
+@pytest.mark.parametrize("settings", ["code", "thesis"])
+def test_out_of_range_context_is_punished(tasks, settings):
+    """The authors' code: -20 × the summed excesses; A.3.3: -20 d_c² (squared distance)."""
+    task = tasks[settings]
     theta = THETA_HIT
     bad = np.array([
         [-0.6, 0.7, -0.5, 0.0],  # y_des 0.1 beyond 0.6
@@ -120,14 +131,17 @@ def test_out_of_range_context_is_penalised_with_minus_20_d_squared(task):
         [-1.5, 0.0, -0.5, 0.0],  # x_des 0.3 below -1.2
         [-0.6, 0.0, -0.205, 0.0],  # inside the box, only the serve rule is violated
     ])  # fmt: skip
-    dx = -0.1 - x_inc_max()
-    want = -20 * np.array([0.1**2, dx**2 + 0.02**2, 0.3**2, (-0.205 - x_inc_max()) ** 2])
+    excess = [[0.1], [-0.1 - x_inc_max(), 0.02], [0.3], [-0.205 - x_inc_max()]]
+    power = 1 if settings == "code" else 2
+    want = np.array([-20 * sum(e**power for e in row) for row in excess])
     with pytest.raises(ValueError, match="outside the task's context space"):
         task.evaluate(theta, bad[:1], workers=0)
     before = task.sim_steps
     r = task.evaluate(theta, np.vstack([bad, CONTEXT]), workers=0, out_of_range="penalise")
     np.testing.assert_allclose(r.returns[:4], want, rtol=1e-9)
     assert not r.executed[:4].any() and r.executed[4] and task.sim_steps > before
+    if settings == "code":  # -20 Σ|violation|: y_des 0.1 too far costs 2 (A.3.3: 0.2)
+        assert r.returns[0] == pytest.approx(-2.0, rel=1e-12)
 
 
 # -- parameters and trajectory ---------------------------------------------------------------
@@ -157,11 +171,15 @@ def test_theta_layout_and_planned_trajectory():
 
 
 # -- punishments -----------------------------------------------------------------------------
+@pytest.mark.parametrize("settings", ["code", "thesis"])
 @pytest.mark.parametrize(
-    "duration, want",
+    "duration, thesis",
     [(0.05, -3 * 0.05), (0.0, -0.3), (-1.0, -3 * 1.1), (5.5, -1.5), (12.0, -21.0)],
 )
-def test_duration_punishment(task, duration, want):
+def test_duration_punishment(tasks, settings, duration, thesis):
+    """A.3.3: -3|l - b|; the authors' code adds -1 (b the violated bound)."""
+    task = tasks[settings]
+    want = thesis - 1.0 if settings == "code" else thesis
     before = task.sim_steps
     theta = np.r_[duration, np.zeros(21)]
     ep = task.episode(theta, CONTEXT)
@@ -172,13 +190,19 @@ def test_duration_punishment(task, duration, want):
     assert math.isnan(r.info["hit"][0])
 
 
-def test_duration_at_the_bounds_is_not_punished(task):
+@pytest.mark.parametrize("settings", ["code", "thesis"])
+def test_duration_at_the_bounds_is_not_punished(tasks, settings):
     for duration in (0.1, 5.0):
-        ep = task.episode(np.r_[duration, np.zeros(21)], CONTEXT)
+        ep = tasks[settings].episode(np.r_[duration, np.zeros(21)], CONTEXT)
         assert ep.executed and 0 < ep.ret <= 0.2
 
 
-def test_joint_limit_punishment_is_the_mean_distance_to_the_joint_box(task):
+@pytest.mark.parametrize("settings", ["code", "thesis"])
+def test_joint_limit_punishment(tasks, settings):
+    """A.3.3: minus the mean (over the plan's T points) Euclidean distance of the planned
+    posture to the joint box; the authors' code: minus the mean excess over the entries
+    above the upper limits plus the mean excess over the entries below the lower ones."""
+    task = tasks[settings]
     theta = np.zeros(22)
     theta[0] = 1.2
     theta[1 + 3 * 1 : 1 + 3 * 2] = [0.0, 0.0, 6.0]  # joint 2 driven past 2.0
@@ -186,8 +210,13 @@ def test_joint_limit_punishment_is_the_mean_distance_to_the_joint_box(task):
     theta[1 + 3 * 4 : 1 + 3 * 5] = [0.0, 0.0, -12.0]  # joint 5 driven below -4.8
     q, _ = promp_reference(theta)
     assert q[:, 1].max() > 2.0 and q[:, 3].max() > 3.1 and q[:, 4].min() < -4.8
-    excess = np.maximum(q - HIGH, 0) + np.maximum(LOW - q, 0)
-    want = -np.mean(np.sqrt(np.sum(excess**2, axis=1)))  # -(1/T) Σ_t d_qpos,t
+    if settings == "thesis":
+        excess = np.maximum(q - HIGH, 0) + np.maximum(LOW - q, 0)
+        want = -np.mean(np.sqrt(np.sum(excess**2, axis=1)))  # -(1/T) Σ_t d_qpos,t
+    else:  # the violating entries, as the authors' code selects them (np.where)
+        above, below = np.where(q > HIGH), np.where(q < LOW)
+        assert len(above[0]) > 0 and len(below[0]) > 0
+        want = -(np.mean((q - HIGH)[above]) + np.mean((LOW - q)[below]))
     before = task.sim_steps
     ep = task.episode(theta, CONTEXT)
     assert not ep.executed and ep.ret == pytest.approx(want, rel=1e-9) and ep.ret < 0
@@ -202,9 +231,9 @@ def test_found_theta_hits_while_zero_and_random_theta_do_not(task):
     ep = task.episode(THETA_HIT, CONTEXT)
     assert ep.executed and ep.info["hit"] == 1.0 and ep.info["min_ball_racket_dist"] < 0.1
     assert ep.info["landed"] == 1.0 and ep.ret > 3.0  # cond. 3
-    # θ = 0 has duration 0: punished, not simulated
+    # θ = 0 has duration 0: punished (the authors' -3 · 0.1 - 1), not simulated
     zero = task.episode(np.zeros(22), CONTEXT)
-    assert not zero.executed and zero.ret == pytest.approx(-0.3)
+    assert not zero.executed and zero.ret == pytest.approx(-1.3)
     # zero weights: the robot holds q0 and misses (cond. 1: at most 0.2)
     rest = task.episode(np.r_[1.0, np.zeros(21)], CONTEXT)
     assert rest.executed and rest.info["hit"] == 0.0 and 0 < rest.ret <= 0.2
@@ -277,3 +306,27 @@ def test_registered_and_passes_check_env():
     _, ret, terminated, truncated, info = env.step(THETA_HIT)
     assert terminated and not truncated and info["hit"] == 1.0 and ret > 3.0
     check_env(env, skip_render_check=True)
+
+
+def test_settings_choose_the_punishments_and_keep_the_rest():
+    """settings="code" (default) is the authors' SVSL code, "thesis" A.3.3; an explicit
+    punishments= wins over the settings; unknown values are named in the error."""
+    assert (TableTennisCh3().settings, TableTennisCh3().punishments) == ("code", "code")
+    thesis = make_task("table-tennis-ch3", settings="thesis")
+    assert isinstance(thesis, TableTennisCh3)
+    assert (thesis.settings, thesis.punishments) == ("thesis", "thesis")
+    # A.3.3's box for every setting (the Chapter 4 task's thesis goal-y rule does not apply)
+    np.testing.assert_array_equal(thesis.context_low, [-1.2, -0.6, -1.2, -0.65])
+    np.testing.assert_array_equal(thesis.context_high, [-0.2, 0.6, -0.2, 0.65])
+    assert not thesis.floor_counts_as_landing  # A.3.3 and the SVSL code agree
+    mixed = TableTennisCh3(settings="thesis", punishments="code")
+    assert mixed.punishments == "code"
+    assert mixed.episode(np.r_[5.5, np.zeros(21)], CONTEXT).ret == pytest.approx(-2.5)
+    # workers rebuild the task from its keyword arguments: the punishments travel with them
+    assert thesis._kwargs["punishments"] == "thesis" and mixed._kwargs["punishments"] == "code"
+    with pytest.raises(ValueError, match=r"settings must be one of \('code', 'thesis'\), "
+                                         r"got 'paper'"):  # fmt: skip
+        TableTennisCh3(settings="paper")
+    with pytest.raises(ValueError, match=r"punishments must be one of \('code', 'thesis'\), "
+                                         r"got 'soft'"):  # fmt: skip
+        make_task("table-tennis-ch3", punishments="soft")

@@ -300,9 +300,11 @@ def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
     HiREPS on the planar reacher, seed 0 — the chosen experts' mean solutions at six targets and the
     per-expert context distributions. Trains the figure's declared runs
     (:func:`vslbook.experiments.ch3_runs.figure_runs`, as the ``03_svsl`` notebook does) in
-    ``root`` where not finished."""
+    ``root`` where not finished. The title's second line names the settings the runs' task
+    uses (:func:`vslbook.experiments.ch3_settings.settings_phrase`)."""
     from vslbook.experiments import svsl_planar as P
     from vslbook.experiments.ch3_runs import run_set
+    from vslbook.experiments.ch3_settings import settings_phrase
 
     b = get_budget(budget)
     use_style()
@@ -320,7 +322,8 @@ def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
     k_full = full["iterations_per_expert"]
     k_note = "" if k == k_full else f", K = {k} of {k_full}"
     fig.suptitle(f"Fig. 3.1 (ours, budget {b.name}: {n['n_experts']} experts{k_note}, seed 0 of "
-                 f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)", fontsize=10)  # fmt: skip
+                 f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)\n"
+                 f"{settings_phrase('planar-reacher')}", fontsize=10)  # fmt: skip
     fig.tight_layout()
     return fig
 

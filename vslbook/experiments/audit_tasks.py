@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from vslbook.experiments import audit_probes as probe
 from vslbook.experiments.audit import NOT_FOUND, NOT_STATED, Setting
 
 __all__ = ["TASK_SETTINGS"]
@@ -91,18 +92,6 @@ def _tt_penalty_weights(task: Any) -> tuple[float, float]:
     return tuple(out)
 
 
-def _tt3_context_penalty(task: Any) -> str:
-    """task.context_penalty 0.1 outside the box in one coordinate"""
-    c = np.array(task.valid_low, dtype=float)
-    c[0] -= 0.1
-    p = float(np.asarray(task.context_penalty(c[None]))[0])
-    if math.isclose(p, -20 * 0.01, rel_tol=1e-6):
-        return "-20 d²"
-    if math.isclose(p, -20 * 0.1, rel_tol=1e-6):
-        return "-20 Σ|violation|"
-    return f"{p:.6g} at d = 0.1"
-
-
 def _bpo_probe(task: Any, rod: float, dq: np.ndarray, final: bool = True) -> float:
     """box_pushing.step_reward with the task's reward variant at a probe state: box, goal
     and rod tip on the x-axis (the tip ``rod`` m from the box), the box at the goal pose,
@@ -161,6 +150,14 @@ def _rows(subject: str, figures: str, rows: list[Row]) -> list[Setting]:
 
 
 _CODE = "code (made the figure)"
+_TT3_WHY = "code (made the figure); settings=\"thesis\" gives A.3.3's"
+
+
+def _tt3(kind: str, lines: str) -> tuple[str, str, str, str]:
+    """(thesis, where, code, where) of a Ch. 3 table-tennis punishment (audit_probes.TT3_*)."""
+    thesis, code = getattr(probe, "TT3_" + kind)
+    return (thesis, "A.3.3", code, _SV + "util/table_tennis/utils/hierarchical_reward.py l."
+            + lines + _FACTS.format("§1.1"))  # fmt: skip
 _TT_SPEC_WHY = _CODE
 # fmt: off
 _TT: list[Row] = [
@@ -459,9 +456,12 @@ TASK_SETTINGS: list[Setting] = [
             ("duration bounds (s)", (0.1, 5.0), "A.3.3", (0.1, 5.0),
              _SV + "contextual_environments/mujoco/table_tennis_multi.py" + _FACTS.format("§1.1"),
              _const("table_tennis_ch3", "DURATION_BOUNDS"), "both agree"),
-            ("context out-of-range punishment", "-20 d²", "A.3.3", "-20 Σ|violation|",
-             _SV + "contextual_environments/mujoco/table_tennis_multi.py" + _FACTS.format("§1.1"),
-             _tt3_context_penalty, "thesis"),
+            ("context out-of-range punishment", *_tt3("CONTEXT", "129-135 (check_valid l.100)"),
+             probe.tt3_context_punishment, _TT3_WHY),
+            ("duration punishment (l outside [0.1, 5] s, b the bound)",
+             *_tt3("DURATION", "137-151"), probe.tt3_duration_punishment, _TT3_WHY),
+            ("joint-limit punishment (planned q_d outside the joint box)",
+             *_tt3("JOINTS", "156-183"), probe.tt3_joint_punishment, _TT3_WHY),
             ("serve vertical speed v_z (m/s)", NOT_STATED, "A.3.3 gives none", 1.0,
              _SV + "contextual_environments/mujoco/table_tennis_multi.py" + _FACTS.format("§1.1"),
              _const("table_tennis", "BALL_VZ"),

@@ -97,12 +97,20 @@ def recorded_dir(figure: str, budget: Budget | str | None = None) -> Path:
     return results_dir() / _check_figure(figure) / get_budget(budget).name
 
 
-def figure_metric(figure: str) -> str:
+def figure_metric(figure: str, algo: str | None = None) -> str:
     """The metric ``figure`` plots, from its chapter module's ``METRIC`` (keyed ``4.3c`` for
-    ``fig4-3c`` in Chapter 4, by figure id in Chapter 3)."""
+    ``fig4-3c`` in Chapter 4, by figure id in Chapter 3); where that names one metric per
+    algorithm (Fig. 3.5: SVSL's ``test_return``, PPO's ``eval_return``), the one of ``algo``.
+    """
     module = importlib.import_module(FIGURE_MODULES[_check_figure(figure)])
     key = figure.removeprefix("fig").replace("-", ".")
-    return module.METRIC[key] if key in module.METRIC else module.METRIC[figure]
+    metric = module.METRIC[key] if key in module.METRIC else module.METRIC[figure]
+    if isinstance(metric, str):
+        return metric
+    if algo not in metric:
+        raise ValueError(f"figure {figure} plots one metric per algorithm ({metric}); got "
+                         f"algo={algo!r}")  # fmt: skip
+    return metric[algo]
 
 
 def task_of_env(env: str) -> str:
@@ -390,34 +398,36 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
     """One row per recorded (figure, method, budget), in figure, budget and method order.
 
     Keys: ``figure``, ``method``, ``task``, ``budget``, ``seeds`` (runs with a final value),
-    ``metric`` (the one the figure plots), ``iqm``, ``ci_low``, ``ci_high`` (IQM of each
-    run's final evaluation, i.e. its last row with the metric, with a 95 % stratified
-    bootstrap over seeds: seed 0, the budget's ``bootstrap_reps`` but at most
-    :data:`MAX_REPS`; None where no run has a value) and ``stale`` (a run's recorded code
+    ``metric`` (the one the figure plots for the method's algorithm), ``iqm``, ``ci_low``,
+    ``ci_high`` (IQM of each run's final evaluation, i.e. its last row with the metric, with
+    a 95 % stratified bootstrap over seeds: seed 0, the budget's ``bootstrap_reps`` but at
+    most :data:`MAX_REPS`; None where no run has a value) and ``stale`` (a run's recorded code
     fingerprint differs from what the same files give now).
     """
     from vslbook import stats
 
     rows = []
     for figure in figures or list(FIGURE_MODULES):
-        metric = figure_metric(figure)
         for b in BUDGETS.values():
             directory = recorded_dir(figure, b)
             if not (directory / "runs.csv").exists():
                 continue
             runs, evals, provenance = read_set(directory)
-            finals = evals[(evals["metric"] == metric) & evals["value"].notna()]
-            finals = finals.sort_values(["run", "step"], kind="stable").groupby("run").last()
+            finals = evals[evals["value"].notna()].sort_values(["run", "step"], kind="stable")
+            finals = finals.groupby(["run", "metric"]).last()  # each run's last value of each
             order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
             methods = order + sorted(set(runs["method"]) - set(order))
             pairs = [(m, env) for m in methods
                      for env in dict.fromkeys(runs.loc[runs["method"] == m, "env"])]  # fmt: skip
             for method, env in pairs:  # one row per task of the figure (Fig. 3.2 has two)
                 task = task_of_env(env)
-                names = sorted(runs.loc[(runs["method"] == method) & (runs["env"] == env), "run"])
+                mine = runs[(runs["method"] == method) & (runs["env"] == env)]
+                names = sorted(mine["run"])
                 if not names:
                     continue
-                values = np.array([finals.loc[n, "value"] for n in names if n in finals.index])
+                metric = figure_metric(figure, str(mine["algo"].iloc[0]))
+                values = np.array([finals.loc[(n, metric), "value"] for n in names
+                                   if (n, metric) in finals.index])  # fmt: skip
                 iqm = low = high = math.nan
                 if len(values):
                     point, ci = stats.interval_estimates(

@@ -272,9 +272,12 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
 
     ``curves`` is :func:`reacher_curves`'s frame. The footnote states the budget, seeds, N, K
     and PPO length and how they differ from the thesis; each panel names the thesis's
-    reported outcome (labelled as the thesis's).
+    reported outcome (labelled as the thesis's); the title's second line names the settings
+    (:func:`vslbook.experiments.ch3_settings.settings_phrase`: the thesis's, there is no
+    public code for this task).
     """
     from vslbook import plots, stats
+    from vslbook.experiments.ch3_settings import settings_phrase
 
     b = get_budget(budget)
     n = reacher_counts(b)
@@ -312,7 +315,8 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
     ppo_rewards = ", ".join(n["ppo_rewards"])
     fig.suptitle(
         "Fig. 3.5: episode-based SVSL vs step-based PPO, 5-link reacher — thesis reports: "
-        "PPO ahead with 3.8; SVSL ahead with 3.9 and, clearly, 3.10",
+        "PPO ahead with 3.8; SVSL ahead with 3.9 and, clearly, 3.10\n"
+        f"ours: {settings_phrase('reacher5-ch3')}",
         fontsize=10,
     )
     fig.text(
@@ -324,5 +328,5 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
         "mean action. IQM, 95 % stratified-bootstrap band (thesis: mean ± 2 s.e.).",
         fontsize=7.5, va="bottom",
     )  # fmt: skip
-    fig.tight_layout(rect=(0, 0.07, 1, 0.95))
+    fig.tight_layout(rect=(0, 0.07, 1, 0.92))
     return fig

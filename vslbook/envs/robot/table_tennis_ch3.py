@@ -4,8 +4,9 @@ A 7-DoF Barrett WAM with a bat returns a served ball to a desired landing point 
 opponent's side; θ is a ProMP with a learned movement duration. The simulation (model,
 serve, motors, PD law, contacts, termination, staged reward, success) is the one of the
 Chapter 4 task :class:`~vslbook.envs.robot.table_tennis.TableTennis4D`, reused by
-inheritance; this module changes the context order and ranges, the movement primitive and
-the punishments to those of A.3.3.
+inheritance; this module changes the context order and ranges and the movement primitive to
+those of A.3.3, and the punishments to the authors' SVSL code's (A.3.3's with
+``settings="thesis"``).
 
 Context (A.3.3, in this order: goal first)
     c = [b_des, b_inc] = [x_des, y_des, x_inc, y_inc], with x_des ∈ [-1.2, -0.2],
@@ -47,13 +48,24 @@ Reward (A.3.3; only for an executed episode), d_r = min_t ‖b_t - r_t‖, g = b
     (:func:`vslbook.envs.robot.table_tennis.staged_reward`). An unstable simulation returns
     -25 (executed, unsuccessful), as in the Chapter 4 task.
 
-Punishments (A.3.3; such samples are not simulated and not counted, ``executed=False``)
-    * context outside the valid set (``evaluate(..., out_of_range="penalise")``):
-      R_c = -20 d_c², d_c the Euclidean distance of c to the valid box;
-    * duration l < 0.1: -3 |l - 0.1|;  l > 5: -3 |l - 5|  (checked first);
+Punishments (such samples are not simulated and not counted, ``executed=False``; A.3.3)
+    ``settings="code"`` (default) gives the authors' SVSL_LMOE code's, which drew Fig. 3.2b, d
+    and Fig. 3.3 (``util/table_tennis/utils/hierarchical_reward.py``; CH3_CH4_FACTS §1.1);
+    ``settings="thesis"`` gives A.3.3's; ``punishments="code"|"thesis"`` overrides the
+    settings for the punishments alone. With e = max(low - x, 0) + max(x - high, 0) the
+    excess of x over a box [low, high], entry by entry:
+
+    * context outside the valid set (``evaluate(..., out_of_range="penalise")``), checked
+      first: code -20 Σ_i e_i (``context_invalid_punishment``: -20 × the summed absolute
+      violations); thesis R_c = -20 d_c², d_c the Euclidean distance to the valid box;
+    * duration l outside [0.1, 5] s (both bounds allowed), checked second: code
+      -3 |l - b| - 1 (``action_durations_valid_upper_lower_bound_valid``), thesis R_θ =
+      -3 |l - b|, b the violated bound;
     * planned trajectory outside the joint limits low = [-2.6, -2.0, -2.8, -0.9, -4.8, -1.6,
-      -2.2], high = [2.6, 2.0, 2.8, 3.1, 1.3, 1.6, 2.2]:
-      -(1/T) Σ_t d_qpos,t, d_qpos,t = ‖max(q_d,t - high, 0) + max(low - q_d,t, 0)‖₂ the
+      -2.2], high = [2.6, 2.0, 2.8, 3.1, 1.3, 1.6, 2.2], checked last: code
+      -(mean of (q_d,t,j - high_j) over the entries above high + mean of (low_j - q_d,t,j)
+      over the entries below low), each mean 0 where no entry violates
+      (``joint_motion_mean_minus_penalty``); thesis -(1/T) Σ_t d_qpos,t, d_qpos,t = ‖e_t‖₂ the
       Euclidean distance of the planned posture at t_k to the joint box, averaged over the
       T = n + 1 points of the planned trajectory on [0, t_n].
 
@@ -77,10 +89,16 @@ What had to be interpreted
       decelerates uniformly for 2 s. Holding keeps the planned trajectory (and its joint
       check) on [0, l]. Weights are in radians (no weight scaling). The phase uses the exact
       l; the grid's last point t_n = round(l / dt)·dt may differ from l by up to dt/2.
-    * Punishments follow the thesis, not the authors' code (which adds -1 to the duration
-      punishment, uses -20 Σ|violation| for the context and the mean per-entry excess for
-      the joints). d_qpos,t is read as the Euclidean distance of q_d,t to the joint box.
-      When l is out of range only the duration punishment is given (no trajectory exists).
+    * Punishments. The authors' code is the default (see above); where our task differs
+      from theirs, their formula is applied to ours: the context's excess is measured to the
+      valid box (the code measures it to the A.3.3 box, which its serve does not narrow; in
+      ours the serve rules narrow it by 7.4 mm in x_inc and 0.05 in |y_inc|), and the joint
+      check sees the planned trajectory on [0, t_n] (the code checks its whole reference,
+      the sigmoid-blended plan on [0, l) followed by its 2 s deceleration tail). The facts
+      file names the code's formulas but not these two points; they were read in the code
+      (SVSL_LMOE@52b5404). For the thesis's version d_qpos,t is read as the Euclidean
+      distance of q_d,t to the joint box. In both, when l is out of range only the duration
+      punishment is given (no trajectory exists), as in the code.
     * A planned trajectory longer than the episode (l > 2.8 s) is checked on all of [0, l]
       but executed only for 2.8 s.
     * cond. 3 requires table contact (thesis); a first floor contact after the hit falls in
@@ -102,6 +120,7 @@ from vslbook.envs.robot.table_tennis import (
     JOINT_LOW,
     MAX_STEPS,
     Q0,
+    SETTINGS,
     TABLE_Y_HALF,
     TableTennis4D,
     serve_x_interval,
@@ -111,20 +130,35 @@ from vslbook.envs.robot.task import Episode
 N_DOF, N_BASIS = 7, 3
 DURATION_BOUNDS = (0.1, 5.0)
 DURATION_WEIGHT = 3.0
+#: the constant the authors' code adds to the duration punishment (A.3.3 has none)
+DURATION_OFFSET = 1.0
 CONTEXT_WEIGHT = 20.0
+#: Where the punishments come from: the authors' SVSL code (default) or A.3.3.
+PUNISHMENTS = SETTINGS
 SERVE_VX = BALL_VX_4D  # the fixed serve speed (m/s)
 
 _X_INC_MIN, _X_INC_MAX = (float(v) for v in serve_x_interval(SERVE_VX))
 
 
-def duration_penalty(duration: float) -> float:
-    """A.3.3's R_θ: -3|l - 0.1| for l < 0.1, -3|l - 5| for l > 5, else 0."""
+def check_punishments(punishments: str) -> str:
+    """``punishments`` if it is one of :data:`PUNISHMENTS`, else a ValueError naming both."""
+    if not isinstance(punishments, str) or punishments not in PUNISHMENTS:
+        raise ValueError(f"punishments must be one of {PUNISHMENTS}, got {punishments!r}")
+    return punishments
+
+
+def duration_penalty(duration: float, punishments: str = "code") -> float:
+    """R_θ for l outside [0.1, 5] s, b the violated bound: -3|l - b| - 1 (the authors' code,
+    ``"code"``) or -3|l - b| (A.3.3, ``"thesis"``); 0 inside (bounds included)."""
+    check_punishments(punishments)
     lo, hi = DURATION_BOUNDS
     if duration < lo:
-        return -DURATION_WEIGHT * abs(duration - lo)
-    if duration > hi:
-        return -DURATION_WEIGHT * abs(duration - hi)
-    return 0.0
+        pen = -DURATION_WEIGHT * abs(duration - lo)
+    elif duration > hi:
+        pen = -DURATION_WEIGHT * abs(duration - hi)
+    else:
+        return 0.0
+    return pen - DURATION_OFFSET if punishments == "code" else pen
 
 
 def planned_trajectory(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -144,12 +178,21 @@ def planned_trajectory(theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return q - (q[0] - Q0), dq
 
 
-def joint_limit_penalty(q_d: np.ndarray) -> float:
-    """A.3.3's -(1/T) Σ_t d_qpos,t: minus the mean distance of the planned postures to the
-    joint box (0 when every posture is inside)."""
+def joint_limit_penalty(q_d: np.ndarray, punishments: str = "code") -> float:
+    """The punishment of planned postures ``q_d`` ``(T, 7)`` outside the joint box, 0 when
+    every posture is inside.
+
+    ``"code"`` (the authors'): -(mean of q - high over the entries above high + mean of
+    low - q over the entries below low), each mean 0 without such entries. ``"thesis"``
+    (A.3.3): -(1/T) Σ_t d_qpos,t, d_qpos,t the Euclidean distance of posture t to the box.
+    """
+    check_punishments(punishments)
     q_d = np.asarray(q_d, dtype=np.float64)
-    excess = np.maximum(q_d - JOINT_HIGH, 0.0) + np.maximum(JOINT_LOW - q_d, 0.0)
-    return -float(np.mean(np.linalg.norm(excess, axis=-1)))
+    high = np.maximum(q_d - JOINT_HIGH, 0.0)
+    low = np.maximum(JOINT_LOW - q_d, 0.0)
+    if punishments == "thesis":
+        return -float(np.mean(np.linalg.norm(high + low, axis=-1)))
+    return -sum(float(np.mean(e[e > 0])) if np.any(e > 0) else 0.0 for e in (high, low))
 
 
 def hold_end(
@@ -167,8 +210,12 @@ class TableTennisCh3(TableTennis4D):
     """Table tennis of Section 3.4.2 / A.3.3 (see the module docstring for every detail).
 
     Args:
+        settings: ``"code"`` (default): the authors' SVSL code's punishments, which drew
+            Fig. 3.2b, d; ``"thesis"``: A.3.3's.
+        punishments: ``"code"`` or ``"thesis"``; None: the one of ``settings``.
         floor_counts_as_landing: count a first floor contact after the hit as a landing
-            (the authors' code) instead of cond. 2 (the thesis, default).
+            (the Chapter 4 authors' code) instead of cond. 2 (default: A.3.3 and the SVSL
+            code both score it without a landing). Not tied to ``settings``.
     """
 
     name: ClassVar[str] = "table-tennis-ch3"
@@ -182,8 +229,20 @@ class TableTennisCh3(TableTennis4D):
     info_keys: ClassVar[tuple[str, ...]] = TableTennis4D.info_keys + ("duration",)
     spec: ClassVar[None] = None  # type: ignore[assignment]  # a ProMP, not the ProDMP spec
 
-    def __init__(self, floor_counts_as_landing: bool = False, **kwargs: Any) -> None:
-        super().__init__(floor_counts_as_landing=floor_counts_as_landing, **kwargs)
+    def __init__(
+        self, settings: str = "code", punishments: str | None = None,
+        floor_counts_as_landing: bool = False, **kwargs: Any,
+    ) -> None:  # fmt: skip
+        if not isinstance(settings, str) or settings not in SETTINGS:
+            raise ValueError(f"settings must be one of {SETTINGS}, got {settings!r}")
+        punishments = check_punishments(settings if punishments is None else punishments)
+        super().__init__(settings=settings, punishments=punishments,
+                         floor_counts_as_landing=floor_counts_as_landing, **kwargs)  # fmt: skip
+        # TableTennis4D's settings="thesis" narrows B.4.1.1's goal y (its last context
+        # entry); here the last entry is y_inc, whose range A.3.3 and the code agree on.
+        self.context_low, self.context_high = type(self).context_low, type(self).context_high
+        #: "code": the authors' punishments (default); "thesis": A.3.3's
+        self.settings, self.punishments = settings, punishments
 
     # -- contexts -----------------------------------------------------------------------
     def serve(self, context: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,10 +259,14 @@ class TableTennisCh3(TableTennis4D):
         return np.all((c >= self.valid_low) & (c <= self.valid_high), axis=-1)
 
     def context_penalty(self, contexts: np.ndarray) -> np.ndarray:
-        """A.3.3's R_c = -20 d_c², d_c the distance of c to the valid box."""
+        """The punishment of contexts outside the valid box: -20 Σ_i e_i (the authors' code)
+        or A.3.3's R_c = -20 d_c² = -20 Σ_i e_i² (``punishments="thesis"``), e the entries'
+        excess over the box."""
         c = np.asarray(contexts, dtype=np.float64)
         excess = np.maximum(self.valid_low - c, 0.0) + np.maximum(c - self.valid_high, 0.0)
-        return -CONTEXT_WEIGHT * np.sum(excess**2, axis=-1)
+        if self.punishments == "thesis":
+            excess = excess**2
+        return -CONTEXT_WEIGHT * np.sum(excess, axis=-1)
 
     def describe_contexts(self) -> str:
         return (
@@ -216,11 +279,11 @@ class TableTennisCh3(TableTennis4D):
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
         theta, context = self.episode_args(theta, context)
         duration = float(theta[0])
-        pen = duration_penalty(duration)
+        pen = duration_penalty(duration, self.punishments)
         if pen != 0.0:
             return Episode(pen, False, False, {"duration": duration})
         q_plan, dq_plan = planned_trajectory(theta)
-        pen = joint_limit_penalty(q_plan)
+        pen = joint_limit_penalty(q_plan, self.punishments)
         if pen != 0.0:
             return Episode(pen, False, False, {"duration": duration})
         q_d, dq_d = hold_end(q_plan, dq_plan)
