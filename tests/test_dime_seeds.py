@@ -43,6 +43,34 @@ def test_each_seed_learns_as_it_would_alone(tmp_path):
     assert len({_rows(b)[-1]["train_return"] for b in together}) == 3
 
 
+def test_one_seed_and_the_seed_axis_run_the_same_steps(tmp_path, monkeypatch):
+    """Both run Algorithm 4 through the one loop (vslbook.srl.dime_loop): the same steps in
+    the same order, only the learner differs (one Agent, or a SeedStack over the seeds)."""
+    from vslbook.srl import dime_loop, dime_seeds
+
+    assert dime_seeds.run_algorithm4 is dime_loop.run_algorithm4
+    calls = []
+    for name in ("collect", "update", "evaluate", "end_episodes", "checkpoint"):
+        real = getattr(dime_loop.DimeLoop, name)
+
+        def spy(self, *args, _real=real, _name=name, **kwargs):
+            calls.append((type(self.learner).__name__, _name, len(self.live)))
+            return _real(self, *args, **kwargs)
+
+        monkeypatch.setattr(dime_loop.DimeLoop, name, spy)
+    over = dict(TINY, total_steps=100_000)  # 200 env steps, learning from step 50
+    run("dime", ENV, 0, "smoke", root=tmp_path / "a", overrides=over, progress=False)
+    run_seeds("dime", ENV, [0, 1], "smoke", root=tmp_path / "b", overrides=over, progress=False)
+    one = [c[1:] for c in calls if c[0] == "OneSeed"]
+    axis = [c[1:] for c in calls if c[0] == "StackedSeeds"]
+    assert len(one) + len(axis) == len(calls)
+    assert [name for name, _ in one] == [name for name, _ in axis]
+    assert {n for _, n in one} == {1} and {n for _, n in axis} == {2}
+    steps = [name for name, _ in one]
+    assert steps.count("collect") == 200 and steps.count("update") == 151  # steps 50..200
+    assert steps.count("evaluate") == 1 and steps[-1] == "checkpoint"
+
+
 def test_interrupted_mid_episode_resumes_exactly(tmp_path):
     whole = run_seeds("dime", ENV, [3, 4], "smoke", root=tmp_path / "a", overrides=TINY,
                       progress=False)  # fmt: skip
@@ -60,25 +88,25 @@ def test_a_crash_between_two_seeds_checkpoints_resumes_exactly(tmp_path, monkeyp
     """The stack writes its seeds' checkpoints one after another; a crash between two writes
     leaves seed 3 a checkpoint ahead of seed 4. It rolls back to its previous checkpoint
     (or, at the first checkpoint, starts afresh) so the two resume together, exactly."""
-    from vslbook.srl import dime_seeds
+    from vslbook.srl.dime_state import SeedState
 
     # the full budget, so that counts are env steps: a checkpoint every 40 of 400 steps
     over = TINY | {"total_steps": 400, "eval_every": 100, "checkpoint_every": 40}
     whole = run_seeds("dime", ENV, [3, 4], "full", root=tmp_path / "a", overrides=over,
                       progress=False)  # fmt: skip
-    original = dime_seeds._Seed.checkpoint
+    original = SeedState.checkpoint
     crash_at = 40 if first else 120  # the first checkpoint of the stack, or the third
 
-    def crashing(self, stack, index, final=False):
+    def crashing(self, agent_state, *, final=False, keep_previous=False):
         if self.seed == 4 and self.step >= crash_at and not final:
             raise KeyboardInterrupt("killed between the two seeds' checkpoints")
-        return original(self, stack, index, final)
+        return original(self, agent_state, final=final, keep_previous=keep_previous)
 
-    monkeypatch.setattr(dime_seeds._Seed, "checkpoint", crashing)
+    monkeypatch.setattr(SeedState, "checkpoint", crashing)
     with pytest.raises(KeyboardInterrupt):
         run_seeds("dime", ENV, [3, 4], "full", root=tmp_path / "b", overrides=over,
                   progress=False)  # fmt: skip
-    monkeypatch.setattr(dime_seeds._Seed, "checkpoint", original)
+    monkeypatch.setattr(SeedState, "checkpoint", original)
     states = [rd / "checkpoint" / "state.pt" for rd in sorted((tmp_path / "b").glob("dime-*"))]
     steps = [torch.load(p, weights_only=False)["step"] if p.exists() else 0 for p in states]
     assert steps[0] > steps[1] and (steps[1] == 0) == first  # seed 3 ahead of seed 4
