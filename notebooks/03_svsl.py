@@ -715,3 +715,15 @@ assert len(strikes) == 3 and all(s["episode"].ret == s["episode"].ret for s in s
 from vslbook.experiments.audit import algorithm_audit, show_audit
 
 show_audit(algorithm_audit(3), only_differences=True)
+
+# %% [markdown]
+# **Tables A.1–A.5 as the thesis prints them**, with the value our runs use beside each cell
+# (`vslbook.experiments.thesis_tables`: `ours` is read from the configuration of `vslbook run
+# ... --budget full`; a smaller budget changes N and K only). Red cells differ, and the
+# caption says why; grey cells are not compared.
+
+# %%
+from vslbook.experiments.thesis_tables import show_thesis_table
+
+for name in ("A.1", "A.2", "A.3", "A.4", "A.5"):
+    display(show_thesis_table(name))

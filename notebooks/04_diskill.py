@@ -1048,6 +1048,18 @@ assert all(cfg.beta >= cfg.alpha for cfg in curricula.values())
 print(f"β ≥ α in all {len(curricula)} configurations with a curriculum, as Section 2 requires")
 
 # %% [markdown]
+# **Tables B.1–B.7 as the thesis prints them**, with the value each run uses beside each cell
+# (`vslbook.experiments.thesis_tables`: `ours` is read from `vslbook run METHOD --env ENV
+# --budget full`'s configuration; tanh, Adam and the like are facts of the code). Red cells
+# differ, and the caption says why; grey cells are not compared (B.1's SVSL is not run here).
+
+# %%
+from vslbook.experiments.thesis_tables import show_thesis_table
+
+for name in ("B.1", "B.2", "B.3", "B.4", "B.5", "B.6", "B.7"):
+    display(show_thesis_table(name))
+
+# %% [markdown]
 # **Where the implementation makes its own choices** (each one is documented in the module it
 # concerns):
 #

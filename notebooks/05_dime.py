@@ -83,6 +83,19 @@ for use, name in LIVE.items():
 RUN_SETS = chapter5_run_sets(budget, dmc=LIVE["dmc"], small=LIVE["small"])
 
 # %% [markdown]
+# **Tables C.1–C.3 as the thesis prints them**, with our value beside each cell
+# (`vslbook.experiments.thesis_tables`): the observation and action sizes of the environments
+# we build, and DIME's and CrossQ's configurations at the thesis's sizes (the live runs differ
+# from them as printed above, and in their counts). Red cells differ, and the caption says
+# why; grey cells are not compared (the baselines this package does not run).
+
+# %%
+from vslbook.experiments.thesis_tables import show_thesis_table
+
+for name in ("C.1", "C.2", "C.3"):
+    display(show_thesis_table(name))
+
+# %% [markdown]
 # ## 1. The entropy lower bound
 #
 # ### 1.1 Two chains: noising and denoising
