@@ -152,7 +152,7 @@ def run_seeds(
             record = _record(algo, env, seed, bud, config)
             rd = open_run(root, record, code_exclude=spec.independent_of,
                           reuse_stale=reuse_stale, wait=wait, restart=restart,
-                          verify=_verifier(spec, record, bud))  # fmt: skip
+                          verify=_verifier(spec, record, bud, seed_axis=True))  # fmt: skip
             out.append(rd)
             if rd.failed:
                 warnings.warn(f"run {rd.name} diverged before; not re-run", stacklevel=2)
@@ -180,14 +180,16 @@ def run_seeds(
             rd.release()
 
 
-def _verifier(spec: Any, record: dict[str, Any], bud: Budget):
+def _verifier(spec: Any, record: dict[str, Any], bud: Budget, seed_axis: bool = False):
     """``verify(rd)`` for :func:`vslbook.run_open.open_run`: today's code replays the run's
-    first rows (:func:`vslbook.replay.replay_matches`)."""
+    first rows (:func:`vslbook.replay.replay_matches`), one seed alone; for runs the seed
+    axis trains (``seed_axis``) to :data:`vslbook.replay.SEED_AXIS_RTOL`."""
 
     def verify(rd: RunDir) -> str | None:
-        from vslbook.replay import replay_matches
+        from vslbook.replay import RTOL, SEED_AXIS_RTOL, replay_matches
 
-        return replay_matches(spec, record, rd.metrics(), bud)
+        rtol = SEED_AXIS_RTOL if seed_axis else RTOL
+        return replay_matches(spec, record, rd.metrics(), bud, rtol=rtol)
 
     return verify
 
