@@ -12,6 +12,13 @@
 
 A failing check inside a notebook fails the build (``nb_execution_raise_on_error``), and
 so does any Sphinx warning (``-W``).
+
+The notebooks execute with ``VSLBOOK_PROGRESS=summary`` (:mod:`vslbook.progress`; ``off``
+is kept if set): a static page cannot redraw a progress bar, so each run set prints one
+plain line when it ends instead of bars frozen at ``0%``. MyST-NB's jupyter-cache executor
+starts each kernel with this process's environment, so the kernels see the mode. The cache
+key is the notebooks' code only, so a cache stamped with another output format
+(:data:`CACHE_FORMAT`, e.g. outputs executed with live bars) is emptied once.
 """
 
 from __future__ import annotations
@@ -33,6 +40,10 @@ EXTRA_PAGES = ("bibliography.md",)
 # on demand, and its web fonts.
 MATHJAX_PARTS = ("tex-chtml.js", "input/tex/extensions", "output/chtml/fonts/woff-v2",
                  "ui", "a11y", "adaptors")
+#: How the cached outputs were made (bumped when the kernels' environment changes what a
+#: notebook prints): a cache without this stamp is emptied before the build.
+CACHE_FORMAT = "progress=summary"
+CACHE_STAMP = "vslbook-cache-format.txt"
 
 
 def site_dir(budget: str) -> Path:
@@ -115,6 +126,24 @@ def stage_static(static: Path) -> None:
                     _sync(f, target / part / f.relative_to(p))
 
 
+def progress_mode_for_site() -> str:
+    """``$VSLBOOK_PROGRESS`` for the executed notebooks: ``summary`` (``off`` if so set)."""
+    return "off" if os.environ.get("VSLBOOK_PROGRESS", "").strip().lower() == "off" else "summary"
+
+
+def prepare_cache(cache: Path) -> None:
+    """Empty ``cache`` if its outputs were made in another format (:data:`CACHE_FORMAT`)."""
+    stamp = cache / CACHE_STAMP
+    if cache.exists() and any(cache.iterdir()):
+        if stamp.is_file() and stamp.read_text().strip() == CACHE_FORMAT:
+            return
+        print(f"{cache}: its outputs predate {CACHE_FORMAT!r} (e.g. progress bars frozen on "
+              "the page); emptied, every notebook executes again (finished runs are reused)")
+        shutil.rmtree(cache)
+    cache.mkdir(parents=True, exist_ok=True)
+    stamp.write_text(CACHE_FORMAT + "\n")
+
+
 def build(budget: str, *, quiet: bool = False) -> Path:
     """Build the site of ``budget``; return its landing page."""
     if budget not in BUDGETS:
@@ -128,7 +157,11 @@ def build(budget: str, *, quiet: bool = False) -> Path:
     out = site_dir(budget)
     os.environ["VSLBOOK_BUDGET"] = budget
     os.environ["VSLBOOK_BOOK_STATIC"] = str(static)
-    os.environ["VSLBOOK_BOOK_CACHE"] = str(ROOT / "build" / "book-cache" / budget)
+    cache = ROOT / "build" / "book-cache" / budget
+    prepare_cache(cache)
+    os.environ["VSLBOOK_BOOK_CACHE"] = str(cache)
+    # one plain line per run set instead of progress bars frozen on the page
+    os.environ["VSLBOOK_PROGRESS"] = progress_mode_for_site()
     os.environ.setdefault("VSLBOOK_BOOK_TIMEOUT", "2400" if budget == "smoke" else "-1")
     os.environ.setdefault("VSLBOOK_FIGURES", str(ROOT / "build" / "figures"))
     # The kernels draw inline (figures become page images), whatever a caller exported for

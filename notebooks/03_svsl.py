@@ -548,8 +548,7 @@ from vslbook.experiments import svsl_beer_pong as BP
 bp_counts = BP.beer_pong_counts(budget)
 print("counts at this budget:", bp_counts)
 t0 = time.perf_counter()
-bp_runs = {m: [BP.run_beer_pong(m, s, root, budget, progress=True)
-               for s in range(bp_counts["seeds"])] for m in BP.METHODS}  # fmt: skip
+bp_runs = BP.run_all(root, budget, progress=True)  # method -> run directories
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 

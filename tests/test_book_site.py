@@ -4,9 +4,11 @@ browser) and check what a reader sees.
 
 Per page: no raw ``$$`` or ``\\begin{`` left in the rendered text (MathJax typeset all
 math), every image loaded, no console error or uncaught exception, no request to any host
-but the local server (the site works offline), and every thesis-numbered equation anchor
-(``#eq-N-M``) holds typeset math. One screenshot per page (plus its first equation and
-its first figure, where it has them) goes to ``build/screenshots/``.
+but the local server (the site works offline), every thesis-numbered equation anchor
+(``#eq-N-M``) holds typeset math, and no progress bar is left in the outputs (tqdm's text
+``0%| | 0/N [...`` or a widget output: a static page cannot redraw a bar, so it stays
+frozen; :func:`vslbook.progress.frozen_bars`). One screenshot per page (plus its first
+equation and its first figure, where it has them) goes to ``build/screenshots/``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,8 @@ import threading
 from pathlib import Path
 
 import pytest
+
+from vslbook.progress import frozen_bars
 
 ROOT = Path(__file__).resolve().parents[1]
 SITE = ROOT / "build" / "site-smoke"
@@ -43,6 +47,9 @@ _PROSE = """() => {
 }"""
 _IMAGES = """() => Array.from(document.images).map(i => ({src: i.currentSrc || i.src,
   ok: i.complete && i.naturalWidth > 0}))"""
+# The text of the notebooks' outputs, as a reader sees it.
+_OUTPUTS = """() => Array.from(document.querySelectorAll('.cell_output'))
+  .map(e => e.innerText).join('\\n')"""
 _ANCHORS = """() => Array.from(document.querySelectorAll('[id^="eq-"]')).map(e => ({
   id: e.id, typeset: e.querySelector('mjx-container') !== null
     || (e.nextElementSibling && e.nextElementSibling.querySelector('mjx-container') !== null)
@@ -152,6 +159,8 @@ def _check_page(browser, url: str, name: str, server: str) -> list[str]:
     for anchor in page.evaluate(_ANCHORS):
         if not anchor["typeset"]:
             problems.append(f"{name}: equation anchor #{anchor['id']} holds no typeset math")
+    problems += [f"{name}: progress bar left on the page: {bar}"
+                 for bar in frozen_bars(page.evaluate(_OUTPUTS), page.content())]
     page.screenshot(path=str(SHOTS / f"{stem}.png"))
     equation = page.locator("mjx-container[display='true']")
     if equation.count():

@@ -71,6 +71,8 @@ def test_bad_input():
         B.method_config("MORE", "smoke")
     with pytest.raises(ValueError, match="unknown method"):
         B.run_beer_pong("svsl", 0, "/nonexistent", "smoke")
+    with pytest.raises(ValueError, match="unknown method"):
+        B.run_all("/nonexistent", "smoke", methods=("SVSL", "PPO"))
     with pytest.raises(ValueError, match="seed"):
         B.run_beer_pong("SVSL", -1, "/nonexistent", "smoke")
     with pytest.raises(ValueError, match="grid shape"):
@@ -113,7 +115,8 @@ def smoke_runs(tmp_path_factory):
     root = tmp_path_factory.mktemp("bp")
     with pytest.MonkeyPatch.context() as mp:
         mp.setenv("VSLBOOK_WORKERS", "0")  # in-process: no pool start-up in a test
-        runs = {m: [B.run_beer_pong(m, 0, root, "smoke")] for m in B.METHODS}
+        runs = B.run_all(root, "smoke", seeds=1)  # every method, seed 0
+        assert list(runs) == list(B.METHODS)
         yield runs
 
 

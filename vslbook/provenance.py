@@ -61,10 +61,11 @@ def _git_dirty() -> bool | None:
     return bool(out.stdout.strip()) if out.returncode == 0 else None
 
 
-#: Package paths no training run reads: analysis, figures and the notebooks' numerical checks.
+#: Package paths no training run reads: analysis, figures and the notebooks' numerical checks;
+#: and ``progress.py``, which training loops call only to show their progress bars.
 #: Editing them never makes a run stale (:func:`code_fingerprint`).
 NOT_RUN_CODE: tuple[str, ...] = (
-    "bounds/", "data.py", "experiments/", "figures.py", "plots.py", "stats.py",
+    "bounds/", "data.py", "experiments/", "figures.py", "plots.py", "progress.py", "stats.py",
 )  # fmt: skip
 
 

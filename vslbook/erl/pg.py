@@ -20,10 +20,10 @@ from dataclasses import dataclass
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.envs import make
+from vslbook.progress import progress_bar
 from vslbook.registry import config_from_record, register_algorithm
 from vslbook.results import RunDir
 from vslbook.rng_state import restore_rng_state, rng_state
@@ -119,15 +119,14 @@ def train(
         ret, succ = env.evaluate(mean.numpy(), eval_c)
         return float(ret.mean()), float(succ.mean())
 
-    bar = tqdm(
-        range(start, n_iter),
+    bar = progress_bar(
         initial=start,
         total=n_iter,
         disable=not progress,
         desc=f"erl-pg {config['env']} s{config['seed']}",
     )
     done_now = 0
-    for it in bar:
+    for it in range(start, n_iter):
         c = env.sample_contexts(cfg.samples_per_iteration, rng)  # c ~ p(c)
         eps = rng.standard_normal((cfg.samples_per_iteration, d_theta))
         c_t = torch.from_numpy(c)
@@ -152,13 +151,16 @@ def train(
         if (it + 1) % cfg.eval_every == 0 or it + 1 == n_iter:
             row["eval_return"], row["eval_success"] = evaluate()
         run.log(it + 1, **row)
+        bar.update(1)
         bar.set_postfix(ret=f"{row['train_return']:.3f}")
         done_now += 1
         if (it + 1) % cfg.checkpoint_every == 0 or it + 1 == n_iter:
             checkpoint(it + 1)
         if stop_after is not None and done_now >= stop_after and it + 1 < n_iter:
             checkpoint(it + 1)
+            bar.close()
             return None
+    bar.close()
     ret, succ = evaluate()
     return {"iterations": n_iter, "eval_return": ret, "eval_success": succ}
 

@@ -32,8 +32,8 @@ import numpy as np
 import torch
 from stable_baselines3 import PPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
-from tqdm.auto import tqdm
 
+from vslbook.progress import progress_bar
 from vslbook.rng_state import restore_rng_state, rng_state
 
 __all__ = [
@@ -367,7 +367,8 @@ def train_with_checkpoints(
             )
 
     evals_this_call = 0
-    bar = tqdm(total=total_steps, initial=model.num_timesteps, disable=not progress, desc=desc)
+    bar = progress_bar(total=total_steps, initial=model.num_timesteps, disable=not progress,
+                       desc=desc, unit="steps")  # fmt: skip
     if not metrics:  # the initial policy
         log_evaluation({"env_steps": 0, "episodes": 0, "updates": 0})
         evals_this_call += 1

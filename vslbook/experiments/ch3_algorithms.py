@@ -257,10 +257,10 @@ def train_svsl(
         if saved is not None:
             s.load_state_dict(saved["svsl"])
         until = None if stop_after is None else s.iteration + int(stop_after)
-        from tqdm.auto import tqdm
+        from vslbook.progress import progress_bar
 
-        with tqdm(total=config.total_iterations, initial=s.iteration, disable=not progress,
-                  desc=f"svsl {task_name} s{seed}") as bar:  # fmt: skip
+        with progress_bar(total=config.total_iterations, initial=s.iteration,
+                          disable=not progress, desc=f"svsl {task_name} s{seed}") as bar:
 
             contexts = None if probe is None else entropy_contexts(task_name, probe)
 

@@ -31,6 +31,7 @@ from vslbook.budget import Budget, get_budget
 from vslbook.experiments.ch3_algorithms import PPO_ENVS, env_of, task_counts
 from vslbook.experiments.run_plan import FigureRun
 from vslbook.experiments.svsl_context import METHODS
+from vslbook.progress import run_set_progress
 
 __all__ = ["FIGURE_TASKS", "METRIC", "PLANAR_OVERRIDES", "figure_runs", "reacher_method",
            "run_set"]  # fmt: skip
@@ -136,7 +137,8 @@ def run_set(
     if unknown:
         raise ValueError(f"figure {figure} has no method(s) {unknown}; expected some of {known}")
     out: dict[str, list[Path]] = {}
-    for r in runs:
-        if methods is None or r.method in methods:
-            out.setdefault(r.method, []).append(r.train(root, progress=progress))
+    with run_set_progress(f"{figure} runs"):  # one line per set on the book's pages
+        for r in runs:
+            if methods is None or r.method in methods:
+                out.setdefault(r.method, []).append(r.train(root, progress=progress))
     return out

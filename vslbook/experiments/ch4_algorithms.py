@@ -86,11 +86,10 @@ def _train(method: str, envs: dict[str, str]):
         rd: RunDir, record: dict, budget: Budget, *, progress: bool = True,
         stop_after: int | None = None,
     ) -> dict | None:  # fmt: skip
-        from tqdm.auto import tqdm
-
         from vslbook.envs.robot import make_task
         from vslbook.erl.diskill import DiSkill
         from vslbook.erl.diskill import train as train_loop
+        from vslbook.progress import progress_bar
 
         config = config_from_record(DiSkillRun, record)
         task_name = task_of(record["env"], envs)
@@ -102,8 +101,8 @@ def _train(method: str, envs: dict[str, str]):
             if saved is not None:
                 s.load_state_dict(saved["diskill"])
             until = None if stop_after is None else s.iteration + int(stop_after)
-            with tqdm(total=config.iterations, initial=s.iteration, disable=not progress,
-                      desc=f"{method} {task_name} s{seed}") as bar:  # fmt: skip
+            with progress_bar(total=config.iterations, initial=s.iteration, disable=not progress,
+                              desc=f"{method} {task_name} s{seed}") as bar:  # fmt: skip
 
                 def log(it: int, metrics: dict[str, float]) -> None:
                     rd.log(it, **metrics)

@@ -22,6 +22,7 @@ import pandas as pd
 
 from vslbook.budget import Budget, get_budget
 from vslbook.data import collect_runs, load_table
+from vslbook.progress import progress_prefix, run_set_progress
 from vslbook.registry import get_algorithm
 from vslbook.results import RunDir
 from vslbook.srl.dime_config import describe_differences, named_config
@@ -120,7 +121,9 @@ def run_variants(
     ``tables`` and read back through its sha256 check, so the returned table is exactly what
     a later analysis would load. Finished runs made by the same code are reused, interrupted
     ones resume, stale ones are re-run unless ``reuse_stale`` (see
-    :func:`vslbook.training.run`); ``progress`` shows a bar per run.
+    :func:`vslbook.training.run`); ``progress`` shows a bar per run (per variant where its
+    seeds train together), labelled with the variant; on the book's pages one line for the
+    whole set (:func:`vslbook.progress.run_set_progress`).
     """
     if isinstance(seeds, bool) or not isinstance(seeds, int) or seeds < 1:
         raise ValueError(f"seeds must be an integer >= 1, got {seeds!r}")
@@ -130,23 +133,25 @@ def run_variants(
     labels: dict[str, str] = {}
     by_label: dict[str, list[RunDir]] = {}
     used: dict[str, tuple[str, dict[str, Any]]] = {}
-    for label, (algo, overrides) in variants.items():
-        over = {**(common or {}), **overrides}
-        used[label] = (algo, over)
-        if seeds > 1 and get_algorithm(algo).train_seeds is not None:  # one process, seed axis
-            rds = run_seeds(
-                algo, env, list(range(seeds)), bud, root=root, overrides=over,
-                progress=progress, reuse_stale=reuse_stale,
-            )  # fmt: skip
-        else:
-            rds = [
-                run(algo, env, seed, bud, root=root, overrides=over, progress=progress,
-                    reuse_stale=reuse_stale)
-                for seed in range(seeds)
-            ]  # fmt: skip
-        for rd in rds:
-            labels[rd.name] = label
-            by_label.setdefault(label, []).append(rd)
+    with run_set_progress(f"{env} runs ({len(variants)} variant(s) × {seeds} seed(s))"):
+        for label, (algo, overrides) in variants.items():
+            over = {**(common or {}), **overrides}
+            used[label] = (algo, over)
+            with progress_prefix(label):
+                if seeds > 1 and get_algorithm(algo).train_seeds is not None:  # seed axis
+                    rds = run_seeds(
+                        algo, env, list(range(seeds)), bud, root=root, overrides=over,
+                        progress=progress, reuse_stale=reuse_stale,
+                    )  # fmt: skip
+                else:
+                    rds = [
+                        run(algo, env, seed, bud, root=root, overrides=over,
+                            progress=progress, reuse_stale=reuse_stale)
+                        for seed in range(seeds)
+                    ]  # fmt: skip
+            for rd in rds:
+                labels[rd.name] = label
+                by_label.setdefault(label, []).append(rd)
     collect_runs([rd for rds in by_label.values() for rd in rds], tables)
     evals = load_table("evals.csv.gz", tables)
     evals["variant"] = evals["run"].map(labels)

@@ -21,6 +21,7 @@ import pandas as pd
 from vslbook.budget import Budget, get_budget
 from vslbook.erl.diskill_config import diskill_config
 from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
+from vslbook.progress import run_set_progress
 
 __all__ = [
     "FIGURES", "LABELS", "METRIC", "PPO_TASKS", "REDUCED", "THESIS_AHEAD", "THESIS_OUTCOME",
@@ -175,9 +176,10 @@ def run_set(
         if method not in known:
             raise ValueError(f"figure {figure} has no method {method!r}; expected {known}")
     out: dict[str, list[Path]] = {}
-    for r in runs:
-        if methods is None or r.method in methods:
-            out.setdefault(r.method, []).append(r.train(root, progress=progress))
+    with run_set_progress(f"Fig. {figure} runs"):  # one line per set on the book's pages
+        for r in runs:
+            if methods is None or r.method in methods:
+                out.setdefault(r.method, []).append(r.train(root, progress=progress))
     return out
 
 

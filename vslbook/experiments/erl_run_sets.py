@@ -35,9 +35,7 @@ def _planar(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]
 def _beer_pong(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]:
     from vslbook.experiments import svsl_beer_pong as BP
 
-    n = BP.beer_pong_counts(budget)["seeds"]
-    return {m: [BP.run_beer_pong(m, s, root, budget, progress=progress) for s in range(n)]
-            for m in BP.METHODS}  # fmt: skip
+    return BP.run_all(root, budget, progress=progress)
 
 
 def _table_tennis(budget: Budget, root: Path, progress: bool) -> dict[str, list[Path]]:

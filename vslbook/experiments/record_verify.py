@@ -74,7 +74,7 @@ def verify_recorded(figures: list[str] | None = None, budgets: list[str] | None 
     """Check every recorded run of ``figures`` at ``budgets`` (all when None) against
     today's code (see the module's docstring); rewrites a set's ``provenance.json`` when a
     run was verified."""
-    from tqdm.auto import tqdm
+    from vslbook.progress import progress_bar
 
     out: list[VerifyRow] = []
     for figure in figures or list(FIGURE_MODULES):
@@ -84,8 +84,8 @@ def verify_recorded(figures: list[str] | None = None, budgets: list[str] | None 
                 continue
             runs, evals, provenance = read_set(directory)
             changed = False
-            for run in tqdm(list(runs["run"]), desc=f"verify {figure} {name}",
-                            disable=not progress, leave=False):  # fmt: skip
+            for run in progress_bar(list(runs["run"]), desc=f"verify {figure} {name}",
+                                    unit="runs", disable=not progress, leave=False):  # fmt: skip
                 entry = provenance.get(run, {})
                 if not entry_stale(entry):
                     out.append(VerifyRow(figure, name, run, "current"))

@@ -81,10 +81,15 @@ class FigureRun:
         Raises:
             RuntimeError: the run diverged (its ``FAILED`` record in the message).
         """
+        from contextlib import nullcontext
+
+        from vslbook.progress import progress_prefix
         from vslbook.training import run
 
-        rd = run(self.algo, self.env, self.seed, self.budget, root=root,
-                 overrides=self.overrides or None, progress=progress, **kwargs)  # fmt: skip
+        # a variant's bar names its legend entry (the algorithm's own label does not)
+        with progress_prefix(self.method) if self.overrides else nullcontext():
+            rd = run(self.algo, self.env, self.seed, self.budget, root=root,
+                     overrides=self.overrides or None, progress=progress, **kwargs)  # fmt: skip
         if rd.failed:
             raise RuntimeError(f"{rd.path} diverged: {rd.failure.get('message')}")
         return rd.path

@@ -21,6 +21,7 @@ What is computed here, and how (the task-independent code is
 * :func:`run_beer_pong` — one method for one seed in a resumable run directory. The
   baselines run for as many iterations as SVSL evaluates episodes
   (:func:`svsl_episodes`), so the three curves span the same number of episodes.
+  :func:`run_all`: every method for the budget's seeds (the notebook's run set).
 * :func:`curve_frame` / :func:`learning_curves` — Fig. 3.2a: test return of the mixture
   (θ ~ π(θ | c) on fixed test contexts from p(c)) against *executed* episodes (θ rejected
   before simulation are not counted, A.3.2), IQM and 95 % stratified-bootstrap CI over the
@@ -56,6 +57,7 @@ from vslbook.experiments.svsl_mixtures import (
     mixture_of,
     svsl_episodes,
 )
+from vslbook.progress import run_set_progress
 
 __all__ = [
     "METHODS",
@@ -73,6 +75,7 @@ __all__ = [
     "load_model",
     "method_config",
     "mixture_of",
+    "run_all",
     "run_beer_pong",
     "success_grid",
     "svsl_episodes",
@@ -168,6 +171,24 @@ def run_beer_pong(
     ``progress``: a bar over the iterations.
     """
     return mx.run_method(TASK, method, seed, root, budget, progress=progress)
+
+
+def run_all(
+    root: str | Path,
+    budget: Budget | str | None = None,
+    methods: tuple[str, ...] = METHODS,
+    seeds: int | None = None,
+    *,
+    progress: bool = False,
+) -> dict[str, list[Path]]:
+    """Every method for seeds 0, …, ``seeds`` − 1 (default: the budget's), one after the
+    other; returns ``{method: [run directories]}`` for :func:`learning_curves`."""
+    for m in methods:
+        mx.check_method(m)
+    n = beer_pong_counts(budget)["seeds"] if seeds is None else mx.check_count("seeds", seeds)
+    with run_set_progress("beer pong runs"):  # one line per set on the book's pages
+        return {m: [run_beer_pong(m, s, root, budget, progress=progress) for s in range(n)]
+                for m in methods}  # fmt: skip
 
 
 def draw_learning_curves(

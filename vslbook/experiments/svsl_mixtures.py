@@ -51,7 +51,6 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 import pandas as pd
-from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
 from vslbook.envs.robot import make_task
@@ -76,6 +75,7 @@ from vslbook.experiments.svsl_context import (
     success_grid,
     svsl_episodes,
 )
+from vslbook.progress import progress_bar
 from vslbook.results import RunDir
 from vslbook.stats import iqm_curve
 
@@ -166,8 +166,8 @@ def train_baseline(
     stop = config.iterations
     if stop_after is not None:
         stop = min(algo.iterations_done + int(stop_after), stop)
-    bar = tqdm(total=config.iterations, initial=algo.iterations_done, disable=not progress,
-               desc=f"{method} {task.name} s{seed}")  # fmt: skip
+    bar = progress_bar(total=config.iterations, initial=algo.iterations_done,
+                       disable=not progress, desc=f"{method} {task.name} s{seed}")  # fmt: skip
     for i in range(algo.iterations_done, stop):
         start = time.perf_counter()
         metrics = algo.iteration()

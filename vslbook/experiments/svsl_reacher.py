@@ -55,6 +55,7 @@ from vslbook.budget import Budget, get_budget
 from vslbook.envs.robot.reacher5 import CH3_REWARDS, N_STEPS
 from vslbook.erl.ppo import PPOConfig
 from vslbook.erl.svsl import SVSLConfig, svsl_config
+from vslbook.progress import run_set_progress
 from vslbook.results import RunDir
 
 __all__ = [
@@ -173,9 +174,10 @@ def reacher_runs(
     from vslbook.experiments.ch3_runs import figure_runs
 
     out: dict[tuple[str, str], list[Path]] = {}
-    for run in figure_runs("fig3-5", budget):
-        key = (run.algo.upper(), run.overrides["reward"])
-        out.setdefault(key, []).append(run.train(root, progress=progress))
+    with run_set_progress("fig3-5 runs"):  # one line per set on the book's pages
+        for run in figure_runs("fig3-5", budget):
+            key = (run.algo.upper(), run.overrides["reward"])
+            out.setdefault(key, []).append(run.train(root, progress=progress))
     return out
 
 

@@ -62,6 +62,7 @@ from vslbook.experiments.svsl_mixtures import (
     mixture_of,
     svsl_episodes,
 )
+from vslbook.progress import run_set_progress
 
 __all__ = [
     "METHODS",
@@ -211,8 +212,9 @@ def run_all(
     for m in methods:
         mx.check_method(m)
     n = table_tennis_counts(budget)["seeds"] if seeds is None else mx.check_count("seeds", seeds)
-    return {m: [run_table_tennis(m, s, root, budget, progress=progress) for s in range(n)]
-            for m in methods}  # fmt: skip
+    with run_set_progress("table tennis runs"):  # one line per set on the book's pages
+        return {m: [run_table_tennis(m, s, root, budget, progress=progress) for s in range(n)]
+                for m in methods}  # fmt: skip
 
 
 # --------------------------------------------------------------------------------------

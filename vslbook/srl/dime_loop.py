@@ -44,9 +44,9 @@ from typing import Any, Protocol
 import numpy as np
 import torch
 from torch import Tensor
-from tqdm.auto import tqdm
 
 from vslbook.budget import Budget
+from vslbook.progress import progress_bar
 from vslbook.registry import config_from_record
 from vslbook.results import DivergenceError, RunDir
 from vslbook.srl.cuda_graphs import GraphedUpdates, graphs_wanted
@@ -182,8 +182,8 @@ class DimeLoop:
         self.step = seeds[0].step
         self.watch = FiniteWatch(WATCHED, device, seeds=len(seeds))  # positions in `live`
         self.next_checkpoint = schedule.next_checkpoint(self.step)
-        self.bar = tqdm(total=schedule.total_steps, initial=self.step, disable=not progress,
-                        desc=desc)  # fmt: skip
+        self.bar = progress_bar(total=schedule.total_steps, initial=self.step,
+                                disable=not progress, desc=desc, unit="steps")  # fmt: skip
         self._clock = (time.perf_counter(), self.step, seeds[0].updates)
 
     @property
