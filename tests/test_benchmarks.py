@@ -72,3 +72,27 @@ def test_seed_axis_layer_paths_compute_the_same_gradients():
         assert layers.check_same(16, 3) > 1e-5
     finally:
         layers.BatchedBody._renorm = renorm
+
+
+def test_diskill_iteration_benchmark_splits_an_iteration(capsys):
+    """Di-SkilL's iteration at smoke sizes: one row per task with the five phases and the
+    networks' share, which add up to the iteration."""
+    bench = _load("diskill_iteration")
+    t = bench.bench("reacher5", iterations=1, warmup=0, workers=1, sizes="smoke")
+    out = capsys.readouterr().out
+    for phase in (*bench.PHASES, "networks"):
+        assert phase in out
+    assert "reacher5" in out and "float32" in out
+    assert abs(sum(t[p] for p in bench.PHASES) - t["iteration"]) < 1e-9
+
+
+@pytest.mark.slow
+def test_diskill_iteration_benchmark_compares_seeds_side_by_side(capsys):
+    """The side-by-side mode runs one seed with two workers, then two seeds with one worker
+    each (separate processes), and prints both throughputs and their ratio."""
+    _load("diskill_iteration").main(
+        ["--tasks", "reacher5", "--sizes", "smoke", "--iterations", "1", "--warmup", "0",
+         "--side-by-side"]
+    )  # fmt: skip
+    line = capsys.readouterr().out
+    assert "one seed with 2 workers" in line and "side by side" in line and "ratio" in line

@@ -30,10 +30,13 @@ The curriculum objective 4.3 is split into the per-expert lower bounds 4.4 (expe
    return over its last ``reward_baseline_batches`` batches), and the closed-form terms
    β H[π(·|o)] + (β − α) Σ_i π(c_i | o) log π̃(o | c_i) are summed over all drawn contexts.
 
-All K experts, critics and energy networks are updated together: every parameter has a
-leading expert axis and one loss, the sum of the experts' losses, is differentiated; Adam
-is elementwise and the gradient-norm clip of the energy update is applied per expert, so
-this is K independent updates done in one pass.
+All K experts, critics and energy networks are updated together
+(:mod:`vslbook.erl.diskill_updates`): every parameter has a leading expert axis and one
+loss, the sum of the experts' losses, is differentiated; Adam is elementwise and the
+gradient-norm clip of the energy update is applied per expert, so this is K independent
+updates done in one pass. The networks are float32 unless ``config.dtype`` says float64
+(:mod:`vslbook.erl.diskill_config`); they start from the same seeded float64 initialisation
+either way, and the environment sees θ and the contexts in float64.
 
 The normaliser of π(c | o). The thesis approximates Z_o = ∫ exp φ_o(c) dc by a sum over
 contexts drawn from p(c). The authors' code normalises over whatever batch is at hand (the
@@ -62,7 +65,7 @@ import numpy as np
 import torch
 
 from vslbook.envs.robot.task import EpisodicTask
-from vslbook.erl import trpl
+from vslbook.erl import diskill_updates as updates
 from vslbook.erl.diskill_config import DiSkillConfig, diskill_config
 from vslbook.erl.diskill_nets import (
     EnergyNets,
@@ -71,6 +74,7 @@ from vslbook.erl.diskill_nets import (
     log_gating,
     log_responsibilities,
 )
+from vslbook.erl.diskill_updates import energy_pass, standardise
 from vslbook.results import DivergenceError
 
 __all__ = ["DiSkill", "DiSkillConfig", "diskill_config", "train"]
@@ -78,20 +82,8 @@ __all__ = ["DiSkill", "DiSkillConfig", "diskill_config", "train"]
 Callback = Callable[[int, dict[str, float]], None]
 
 
-def _clip_per_expert(params: list[torch.Tensor], max_norm: float) -> torch.Tensor:
-    """Scale each expert's gradient (leading axis) to norm ≤ ``max_norm``; returns the norms."""
-    sq = sum(p.grad.reshape(p.shape[0], -1).pow(2).sum(1) for p in params if p.grad is not None)
-    norms = torch.as_tensor(sq).sqrt()
-    scale = (max_norm / (norms + 1e-6)).clamp(max=1.0)
-    for p in params:
-        if p.grad is not None:
-            p.grad.mul_(scale.reshape(-1, *([1] * (p.dim() - 1))))
-    return norms
-
-
-def _standardise(x: torch.Tensor) -> torch.Tensor:
-    """Per expert (rows): zero mean, unit standard deviation (+1e-8), as the authors."""
-    return (x - x.mean(1, keepdim=True)) / (x.std(1, keepdim=True) + 1e-8)
+def _adam(module: torch.nn.Module, lr: float) -> torch.optim.Adam:
+    return torch.optim.Adam(module.parameters(), lr=lr, eps=1e-8, fused=True)
 
 
 class DiSkill:
@@ -108,19 +100,22 @@ class DiSkill:
         self, task: EpisodicTask, config: DiSkillConfig, seed: int, workers: int | None = None
     ) -> None:
         self.task, self.config, self.seed, self.workers = task, config, int(seed), workers
-        k, dc, d = config.n_experts, task.context_dim, task.n_params
+        self.dtype = getattr(torch, config.dtype)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(self.seed)
-            self.experts = GaussianExperts(k, dc, d, config.expert_hidden, init_std=config.init_std)
-            self.critics = ValueCritics(k, dc, config.critic_hidden)
-            self.energies = EnergyNets(k, dc, config.context_hidden) if config.curriculum else None
-        self.opt_expert = torch.optim.Adam(self.experts.parameters(), lr=config.lr_policy, eps=1e-8)
-        self.opt_critic = torch.optim.Adam(self.critics.parameters(), lr=config.lr_critic, eps=1e-8)
-        self.opt_context = (
-            torch.optim.Adam(self.energies.parameters(), lr=config.lr_context, eps=1e-8)
-            if self.energies is not None
-            else None
-        )
+            nets = self._networks(torch.float64)  # the seeded initialisation, in float64
+        if self.dtype != torch.float64:  # the same start, rounded to the networks' dtype
+            with torch.random.fork_rng(devices=[]):
+                cast = self._networks(self.dtype)
+            for net, start in zip(cast, nets, strict=True):
+                if net is not None:
+                    net.load_state_dict(start.state_dict())
+            nets = cast
+        self.experts, self.critics, self.energies = nets
+        # Adam's fused CPU kernel: one call per parameter instead of a dozen
+        self.opt_expert = _adam(self.experts, config.lr_policy)
+        self.opt_critic = _adam(self.critics, config.lr_critic)
+        self.opt_context = _adam(self.energies, config.lr_context) if self.energies else None
         self.rng = np.random.default_rng([self.seed, 0])  # contexts from p(c)
         self.gen = torch.Generator().manual_seed(self.seed)  # context indices and θ
         self.test_contexts = task.sample_contexts(
@@ -129,10 +124,29 @@ class DiSkill:
         self.normaliser_contexts = task.sample_contexts(
             config.normaliser_contexts, np.random.default_rng([self.seed, 2])
         )
-        self.reward_history = np.zeros((k, 0))  # the EBM advantage's baseline (last batches)
+        self.reward_history = np.zeros((config.n_experts, 0))  # the EBM advantage's baseline
         self.iteration = 0
         self.samples = 0  # executed episodes
         self.episodes = 0  # all episodes, rejected θ included
+
+    def _networks(
+        self, dtype: torch.dtype
+    ) -> tuple[GaussianExperts, ValueCritics, EnergyNets | None]:
+        cfg, task = self.config, self.task
+        k, dc, d = cfg.n_experts, task.context_dim, task.n_params
+        experts = GaussianExperts(k, dc, d, cfg.expert_hidden, init_std=cfg.init_std, dtype=dtype)
+        critics = ValueCritics(k, dc, cfg.critic_hidden, dtype=dtype)
+        energies = EnergyNets(k, dc, cfg.context_hidden, dtype=dtype) if cfg.curriculum else None
+        return experts, critics, energies
+
+    def _tensor(self, x: Any) -> torch.Tensor:
+        """Contexts or returns as a tensor of the networks' dtype."""
+        return torch.as_tensor(x, dtype=self.dtype)
+
+    def _energies(self, contexts: torch.Tensor) -> torch.Tensor:
+        """φ_o(c_i) (K, N) of contexts (N, dc) shared by all experts (Eq. 4.6)."""
+        assert self.energies is not None
+        return energy_pass(self.energies, contexts, backward=False)[0]
 
     # -- Algorithm 2, lines 2-6 -----------------------------------------------------------
     def draw_contexts(self) -> tuple[torch.Tensor, torch.Tensor | None, torch.Tensor | None]:
@@ -140,11 +154,10 @@ class DiSkill:
         cfg = self.config
         n = cfg.samples_per_expert
         if self.energies is None:  # BBRL: contexts from p(c)
-            c = torch.as_tensor(self.task.sample_contexts(n, self.rng))
+            c = self._tensor(self.task.sample_contexts(n, self.rng))
             return c[None], None, None
-        c_env = torch.as_tensor(self.task.sample_contexts(cfg.env_contexts, self.rng))  # line 2
-        with torch.no_grad():
-            probs = torch.softmax(self.energies.energies(c_env), dim=-1)  # π(c_i|o), Eq. 4.6
+        c_env = self._tensor(self.task.sample_contexts(cfg.env_contexts, self.rng))  # line 2
+        probs = torch.softmax(self._energies(c_env), dim=-1)  # π(c_i|o), Eq. 4.6
         idx = torch.multinomial(probs, n, replacement=True, generator=self.gen)  # line 4
         return c_env[idx], c_env, idx
 
@@ -157,11 +170,14 @@ class DiSkill:
             theta, mean_old = self.experts.sample(ctx, self.gen)  # line 5
             chol_old = self.experts.chol().clone()
         roll = task.evaluate(  # line 6
-            theta.reshape(k * n, -1).numpy(), ctx.reshape(k * n, -1).numpy(), workers=self.workers
+            theta.reshape(k * n, -1).double().numpy(),
+            ctx.reshape(k * n, -1).double().numpy(),
+            workers=self.workers,
         )
         batch = {
             "ctx": ctx, "theta": theta, "mean_old": mean_old, "chol_old": chol_old,
-            "returns": torch.as_tensor(roll.returns).reshape(k, n), "c_env": c_env, "idx": idx,
+            "returns": self._tensor(roll.returns).reshape(k, n), "c_env": c_env, "idx": idx,
+            "episode_returns": roll.returns.reshape(k, n),
             "success": roll.success.reshape(k, n), "executed": roll.executed.reshape(k, n),
         }  # fmt: skip
         batch |= self._responsibilities(batch)
@@ -173,105 +189,61 @@ class DiSkill:
         """log π̃(o | c, θ) of the samples, log π̃(o | c_i) on the drawn contexts (Appendix B.1)."""
         cfg = self.config
         k, n = cfg.n_experts, cfg.samples_per_expert
-        zeros = torch.zeros(k, n, dtype=torch.float64)
+        zeros = torch.zeros(k, n, dtype=self.dtype)
         if self.energies is None or k == 1:
             return {"log_resp": zeros, "log_gate_env": None}
         with torch.no_grad():
-            log_z = torch.logsumexp(self.energies.energies(b["c_env"]), dim=-1)  # (K,)
-            log_pc = self.energies.energies(b["ctx"].reshape(k * n, -1)) - log_z[:, None]
+            phi_env = self._energies(b["c_env"])  # (K, N)
+            log_z = torch.logsumexp(phi_env, dim=-1)  # (K,)
+            log_pc = self._energies(b["ctx"].reshape(k * n, -1)) - log_z[:, None]
             log_resp = log_responsibilities(
                 b["theta"], b["ctx"], self.experts, log_pc.reshape(k, k, n)
             )
             log_gate_env = None
             if cfg.context_responsibilities:
-                log_pc_env = self.energies.energies(b["c_env"]) - log_z[:, None]
-                log_gate_env = log_gating(log_pc_env)  # (K, N)
+                log_gate_env = log_gating(phi_env - log_z[:, None])  # (K, N)
         return {"log_resp": log_resp, "log_gate_env": log_gate_env}
 
-    # -- line 7: experts, Eq. 4.7 -----------------------------------------------------------
+    # -- line 7: experts, Eq. 4.7, and critics -----------------------------------------------
     def update_experts(self, b: dict[str, Any]) -> dict[str, float]:
-        """Trust-region policy gradient on Eq. 4.7, all experts at once; then the critics."""
+        """Trust-region policy gradient on Eq. 4.7, all experts at once
+        (:func:`vslbook.erl.diskill_updates.update_experts`)."""
         cfg = self.config
-        ctx, theta, mean_old, chol_old = b["ctx"], b["theta"], b["mean_old"], b["chol_old"]
-        with torch.no_grad():
-            adv = _standardise(b["returns"] - self.critics.values(ctx) + cfg.alpha * b["log_resp"])
-            logp_old = self.experts.log_prob(theta, mean_old, chol_old)
-        for _ in range(cfg.epochs):
-            mean, chol = self.experts.mean(ctx), self.experts.chol()
-            p_mean, p_chol = trpl.project(
-                mean, chol, mean_old, chol_old, cfg.mean_bound, cfg.cov_bound
-            )
-            ratio = torch.exp(self.experts.log_prob(theta, p_mean, p_chol) - logp_old)
-            loss = (
-                -(ratio * adv).mean(1)
-                - cfg.alpha * self.experts.entropy(p_chol)
-                + cfg.trust_region_coeff * trpl.trust_region_loss(mean, p_mean, p_chol)
-            ).sum()
-            self.opt_expert.zero_grad()
-            loss.backward()
-            self.opt_expert.step()
-        with torch.no_grad():  # the covariance becomes its projection
-            p_mean, p_chol = trpl.project(
-                self.experts.mean(ctx), self.experts.chol(), mean_old, chol_old,
-                cfg.mean_bound, cfg.cov_bound,
-            )  # fmt: skip
-            self.experts.set_chol(p_chol)
-            kl_mean, kl_cov = trpl.kl_parts(
-                self.experts.mean(ctx), self.experts.chol(), mean_old, chol_old
-            )
-        for _ in range(cfg.critic_epochs):  # line 7: V_o(c) regresses R
-            v_loss = (self.critics.values(ctx) - b["returns"]).pow(2).mean(1).sum()
-            self.opt_critic.zero_grad()
-            v_loss.backward()
-            self.opt_critic.step()
-        self._check_finite("expert or critic parameters", self.experts, self.critics)
-        return {
-            "expert_loss": loss.item() / cfg.n_experts,
-            "critic_loss": v_loss.item() / cfg.n_experts,
-            "kl_mean": float(kl_mean.mean()),
-            "kl_cov": float(kl_cov.mean()),
-            "expert_entropy": self.experts.entropy(self.experts.chol()).mean().item(),
-        }
+        with torch.no_grad():  # A = standardise(R − V_o(c) + α log π̃(o | c, θ))
+            values = self.critics.values(b["ctx"])
+            adv = standardise(b["returns"] - values + cfg.alpha * b["log_resp"])
+        metrics = updates.update_experts(self.experts, self.opt_expert, b, adv, cfg)
+        self._check_finite("expert or critic parameters", self.experts)
+        return metrics
+
+    def update_critics(self, b: dict[str, Any]) -> dict[str, float]:
+        """Line 7: the critics V_o(c) regress the returns."""
+        metrics = updates.update_critics(
+            self.critics, self.opt_critic, b["ctx"], b["returns"], self.config.critic_epochs
+        )
+        self._check_finite("expert or critic parameters", self.critics)
+        return metrics
 
     # -- line 8: context distributions, Eq. 4.8 ----------------------------------------------
     def update_contexts(self, b: dict[str, Any], entropy_old: torch.Tensor) -> dict[str, float]:
-        """PPO on the sample form Eq. 4.8 of the context bound 4.5, all energy networks at once."""
+        """PPO on the sample form Eq. 4.8 of the context bound 4.5, all energy networks at once
+        (:func:`vslbook.erl.diskill_updates.update_contexts`)."""
         cfg = self.config
         assert self.energies is not None and self.opt_context is not None
-        returns = b["returns"].numpy()
+        returns = b["episode_returns"]
         self.reward_history = np.concatenate([self.reward_history, returns], axis=1)
         self.reward_history = self.reward_history[
             :, -cfg.reward_baseline_batches * returns.shape[1] :
         ]
-        baseline = torch.as_tensor(self.reward_history.mean(axis=1))
+        baseline = self._tensor(self.reward_history.mean(axis=1))
         # L_c(o, c) of Eq. 4.5 with one θ per context, less a per-expert constant baseline
         adv = (
             b["returns"] - baseline[:, None] + cfg.alpha * b["log_resp"]
             + cfg.alpha * entropy_old[:, None]
         )  # fmt: skip
-        c_env, idx = b["c_env"], b["idx"]
-        gate = b["log_gate_env"]
-        with torch.no_grad():
-            logp_old = torch.log_softmax(self.energies.energies(c_env), -1).gather(1, idx)
-        params = list(self.energies.parameters())
-        for _ in range(cfg.context_epochs):
-            logp = torch.log_softmax(self.energies.energies(c_env), -1)  # (K, N)
-            ratio = torch.exp(logp.gather(1, idx) - logp_old)
-            clipped = ratio.clamp(1 - cfg.context_clip, 1 + cfg.context_clip)
-            surrogate = torch.minimum(ratio * adv, clipped * adv).mean(1)
-            p = logp.exp()
-            entropy = -(p * logp).sum(1)  # H[π(·|o)] over the drawn contexts
-            resp = (p * gate).sum(1) if gate is not None else torch.zeros_like(entropy)
-            loss = (-surrogate - cfg.beta * entropy - (cfg.beta - cfg.alpha) * resp).sum()
-            self.opt_context.zero_grad()
-            loss.backward()
-            _clip_per_expert(params, cfg.context_grad_clip)
-            self.opt_context.step()
+        metrics = updates.update_contexts(self.energies, self.opt_context, b, adv, cfg)
         self._check_finite("energy-network parameters", self.energies)
-        return {
-            "context_loss": loss.item() / cfg.n_experts,
-            "context_entropy": entropy.mean().item(),
-        }
+        return metrics
 
     def _check_finite(self, what: str, *modules: torch.nn.Module) -> None:
         for m in modules:
@@ -282,23 +254,21 @@ class DiSkill:
     # -- Algorithm 3 -------------------------------------------------------------------------
     def choose_experts(self, contexts: np.ndarray, generator: torch.Generator) -> np.ndarray:
         """o ~ π(o | c) per context (Algorithm 3, line 2; Z_o over the fixed normaliser batch)."""
-        c = torch.as_tensor(contexts)
+        c = self._tensor(contexts)
         if self.energies is None or self.config.n_experts == 1:
             return np.zeros(len(c), dtype=np.int64)
         with torch.no_grad():
-            log_z = torch.logsumexp(
-                self.energies.energies(torch.as_tensor(self.normaliser_contexts)), dim=-1
-            )
-            gate = log_gating(self.energies.energies(c) - log_z[:, None]).exp()  # (K, M)
+            log_z = torch.logsumexp(self._energies(self._tensor(self.normaliser_contexts)), dim=-1)
+            gate = log_gating(self._energies(c) - log_z[:, None]).exp()  # (K, M)
         return torch.multinomial(gate.T, 1, generator=generator)[:, 0].numpy()
 
     def mean_parameters(self, contexts: np.ndarray, experts: np.ndarray) -> np.ndarray:
         """The chosen experts' mean θ at each context: (M, n_params)."""
-        c = torch.as_tensor(contexts)
+        c = self._tensor(contexts)
         k = self.config.n_experts
         with torch.no_grad():
             means = self.experts.mean(c[None].expand(k, -1, -1))  # (K, M, d)
-        return means[torch.as_tensor(experts), torch.arange(len(c))].numpy()
+        return means[torch.as_tensor(experts), torch.arange(len(c))].double().numpy()
 
     def test(self) -> dict[str, float]:
         """Algorithm 3 on the fixed test contexts with the experts' means: mean return, success,
@@ -329,12 +299,13 @@ class DiSkill:
         with torch.no_grad():
             entropy_old = self.experts.entropy(b["chol_old"])
         metrics = {
-            "mean_return": float(b["returns"].mean()),
+            "mean_return": float(b["episode_returns"].mean()),
             "rejected": float((~b["executed"]).mean()),
         }
         if self.task.has_success:
             metrics["success"] = float(b["success"].mean())
         metrics |= self.update_experts(b)
+        metrics |= self.update_critics(b)
         if self.energies is not None:
             metrics |= self.update_contexts(b, entropy_old)
         self.iteration += 1
@@ -362,6 +333,12 @@ class DiSkill:
         }
 
     def load_state_dict(self, state: dict[str, Any]) -> None:
+        saved = state["experts"]["chol_flat"].dtype
+        if saved != self.dtype:
+            raise ValueError(
+                f"the checkpoint holds {saved} networks, the configuration asks for {self.dtype} "
+                "(config.dtype)"
+            )
         self.experts.load_state_dict(state["experts"])
         self.critics.load_state_dict(state["critics"])
         self.opt_expert.load_state_dict(state["opt_expert"])

@@ -23,6 +23,12 @@ episodes per expert (Table B.5: 80); the EBM advantage's baseline averages 1 bat
 tennis hard, box pushing and mini golf (the code's ``norm_buffer_size``; hopper jump's is
 10, and for the 5-link reacher and table tennis 4D no configuration is published, so 10
 stays). A budget changes only counts (iterations, seeds).
+
+The networks' dtype is no hyper-parameter of the thesis: the authors' code runs float64, and
+``dtype="float32"`` (the default) runs the experts, critics and energy networks in float32,
+which changes no result measurably (``tests/test_erl_diskill_updates.py`` compares one update
+of each from the same start) and costs a fraction of the time; ``dtype="float64"`` keeps
+the authors' precision. The covariance projection solves in float64 either way.
 """
 
 from __future__ import annotations
@@ -33,7 +39,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CODE_SETTINGS", "METHODS", "SETTINGS", "TASKS", "DiSkillConfig", "diskill_config"]
+__all__ = [
+    "CODE_SETTINGS", "DTYPES", "METHODS", "SETTINGS", "TASKS", "DiSkillConfig", "diskill_config",
+]  # fmt: skip
 
 #: The Chapter 4 tasks that have Di-SkilL presets (names of :func:`vslbook.envs.robot.make_task`).
 TASKS = (
@@ -44,6 +52,10 @@ TASKS = (
 METHODS = ("diskill", "lindiskill", "bbrl", "diskill-v2", "diskill-v3")
 #: Where a preset's values come from: the authors' configurations or the thesis's tables.
 SETTINGS = ("code", "thesis")
+#: The networks' dtypes: float32 (the default; its updates agree with float64's to the
+#: tolerances of ``tests/test_erl_diskill_updates.py``, at a fraction of the cost) or float64
+#: (the authors' choice).
+DTYPES = ("float32", "float64")
 #: task → Di-SkilL's fields where the authors' configuration differs from Tables B.2-B.7
 #: (diskill/configs/hopper_jump.yml l.111 samples, l.40 norm_buffer_size; table_tennis.yml,
 #: box_pushing.yml, mini_golf.yml l.39-40 norm_buffer_size).
@@ -105,10 +117,14 @@ class DiSkillConfig:
     test_contexts: int = 75  #: contexts of an evaluation (fixed per seed)
     normaliser_contexts: int = 5000  #: contexts from p(c) that normalise π(c|o) at evaluation
     settings: str = "code"  #: the preset's source: the authors' configuration or the tables
+    #: the networks' dtype (:data:`DTYPES`); the covariance projection solves in float64 either way
+    dtype: str = "float32"
 
     def __post_init__(self) -> None:
         if self.settings not in SETTINGS:
             raise ValueError(f"settings must be one of {SETTINGS}, got {self.settings!r}")
+        if self.dtype not in DTYPES:
+            raise ValueError(f"dtype must be one of {DTYPES}, got {self.dtype!r}")
         for name in ("alpha", "beta"):
             v = getattr(self, name)
             if not (_is_number(v) and v >= 0):

@@ -24,7 +24,8 @@ used by Di-SkilL: tanh hidden layers initialised orthogonally with gain √2 and
 an orthogonal output layer with a small gain (0.01 for the expert means and the energies,
 1 for the critics), and a Cholesky diagonal diag = softplus(z + s) + 1e-5 with
 s = softplus⁻¹(init_std − 1e-5), so that z = 0 gives L = init_std · I. Everything is
-float64 unless another ``dtype`` is asked for.
+float64 unless another ``dtype`` is asked for (:class:`vslbook.erl.diskill.DiSkill` asks for
+the configuration's, float32 by default).
 """
 
 from __future__ import annotations
@@ -272,20 +273,27 @@ class GaussianExperts(nn.Module):
             raise ValueError("chol's diagonal entries must be > 0")
         return chol
 
-    def log_prob(self, theta: torch.Tensor, mean: torch.Tensor, chol: torch.Tensor) -> torch.Tensor:
-        """log N(θ | μ, LLᵀ): theta and mean (K, B, d), chol (K, d, d) → (K, B)."""
+    def log_prob(
+        self, theta: torch.Tensor, mean: torch.Tensor, chol: torch.Tensor, *, check: bool = True
+    ) -> torch.Tensor:
+        """log N(θ | μ, LLᵀ): theta and mean (K, B, d), chol (K, d, d) → (K, B).
+
+        ``check=False`` skips the input checks (for callers that checked their inputs).
+        """
         k, d = self.n_experts, self.theta_dim
-        theta = _tensor("theta", theta, (k, None, d), self.dtype)
-        mean = _tensor("mean", mean, (k, theta.shape[1], d), self.dtype)
-        chol = self._check_chol(chol)
+        if check:
+            theta = _tensor("theta", theta, (k, None, d), self.dtype)
+            mean = _tensor("mean", mean, (k, theta.shape[1], d), self.dtype)
+            chol = self._check_chol(chol)
         # z = L⁻¹(θ − μ) per sample; ‖z‖² is the Mahalanobis distance
         z = torch.linalg.solve_triangular(chol, (theta - mean).transpose(1, 2), upper=False)
         half_log_det = torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)  # ½ log|Σ|
         return -0.5 * z.pow(2).sum(1) - half_log_det[:, None] - 0.5 * d * math.log(2 * math.pi)
 
-    def entropy(self, chol: torch.Tensor) -> torch.Tensor:
+    def entropy(self, chol: torch.Tensor, *, check: bool = True) -> torch.Tensor:
         """H[N(·, LLᵀ)] = ½ d (1 + log 2π) + Σ_i log L_ii: chol (K, d, d) → (K,)."""
-        chol = self._check_chol(chol)
+        if check:
+            chol = self._check_chol(chol)
         half_log_det = torch.log(torch.diagonal(chol, dim1=-2, dim2=-1)).sum(-1)
         return 0.5 * self.theta_dim * (1.0 + math.log(2 * math.pi)) + half_log_det
 

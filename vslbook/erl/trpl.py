@@ -37,11 +37,16 @@ eigenvalues 1 + u_i with u_i = (λ_i − 1)/(η λ_i + 1), and
 The root is found in float64 by Newton's method on log C − log ε_Σ as a function of log η,
 safeguarded by bisection on the bracket η ∈ [1e-20, 1e20], batched over all leading
 dimensions, until |log C − log ε_Σ| ≤ 1e-12 (at most 100 steps; an entry that stops early
-returns the feasible end of its bracket). The layer's gradient follows from the implicit
-function theorem applied to C(Σ̃(η*; Σ, Σ_o)) = ε_Σ: dη*/dx = −(∂C/∂x)/(∂C/∂η) for every
-input x (Σ and Σ_o alike). It is realised by evaluating Σ̃ with autograd at
-η = η* − (C − sg(C))/sg(∂C/∂η), whose value is η* and whose derivative is the implicit one
-(sg: stop-gradient). This is the same gradient as the authors' hand-written backward pass.
+returns the feasible end of its bracket). It starts at η = √(C(Σ)/ε_Σ) − 1, the root when Σ
+is close to Σ_o (then C(Σ̃(η)) ≈ C(Σ)/(η + 1)²), so inside a trust region a few steps
+suffice. The layer's gradient follows from the implicit function theorem applied to
+C(Σ̃(η*; Σ, Σ_o)) = ε_Σ: dη*/dx = −(∂C/∂x)/(∂C/∂η) for every input x (Σ and Σ_o alike).
+It is realised as L̃(η*) + (dL̃/dη)·(η − sg(η)) with η = η* − (C − sg(C))/sg(∂C/∂η)
+(sg: stop-gradient): the value is L̃(η*), and autograd adds the implicit term to the
+derivative of L̃(η*) at fixed η*, where C is evaluated from the interpolation's own factors
+and dL̃/dη in closed form (dΣ̃/dη = (Σ̃ − Σ̃Σ_o⁻¹Σ̃)/(η + 1) through the derivative of the
+Cholesky factorisation). This is the same gradient as the authors' hand-written backward
+pass.
 
 Where a bound already holds the layer is the identity, in value and in gradient. Where the
 covariance solve fails (no feasible η in the bracket, a non-finite value, or a failed
@@ -62,7 +67,9 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import Any
 
+import numpy as np
 import torch
 from torch import Tensor
 
@@ -138,15 +145,21 @@ def _broadcast(named: dict[str, torch.Size]) -> torch.Size:
 # ------------------------------------------------------------------------------ KL parts
 
 
-def _phi(u: Tensor) -> Tensor:
-    """u − log(1 + u) ≥ 0 for u > −1, accurate also for small |u| (series below 1e-2)."""
-    small = u.abs() < 1e-2
-    us = torch.where(small, u, torch.zeros_like(u))
-    series = us.square() * (
-        1 / 2 - us * (1 / 3 - us * (1 / 4 - us * (1 / 5 - us * (1 / 6 - us * (1 / 7 - us / 8)))))
+def _phi(u: Any, xp: Any = torch) -> Any:
+    """u − log(1 + u) ≥ 0 for u > −1, accurate also for small |u| (series below 1e-2);
+    ``u`` a tensor (``xp`` torch) or a numpy array (``xp`` numpy)."""
+    small = abs(u) < 1e-2
+    us = xp.where(small, u, 0.0)
+    series = (
+        us
+        * us
+        * (
+            1 / 2
+            - us * (1 / 3 - us * (1 / 4 - us * (1 / 5 - us * (1 / 6 - us * (1 / 7 - us / 8)))))
+        )
     )
-    ul = torch.where(small, torch.ones_like(u), u)
-    return torch.where(small, series, ul - torch.log1p(ul))
+    ul = xp.where(small, 1.0, u)
+    return xp.where(small, series, ul - xp.log1p(ul))
 
 
 def _mean_part(mean: Tensor, old_mean: Tensor, old_chol: Tensor) -> Tensor:
@@ -203,7 +216,9 @@ def kl_parts(
 # ------------------------------------------------------------------------------ mean projection
 
 
-def project_mean(mean: Tensor, old_mean: Tensor, old_chol: Tensor, eps_mean: float) -> Tensor:
+def project_mean(
+    mean: Tensor, old_mean: Tensor, old_chol: Tensor, eps_mean: float, *, check: bool = True
+) -> Tensor:
     """Project μ onto {μ̃ : m(μ̃) ≤ ε_μ} in the Σ_o-metric (closed form, plain autograd).
 
     Where m(μ) > ε_μ: ω = √(m(μ)/ε_μ) − 1 and μ̃ = (μ + ω μ_o)/(1 + ω), so that m(μ̃) = ε_μ;
@@ -214,16 +229,19 @@ def project_mean(mean: Tensor, old_mean: Tensor, old_chol: Tensor, eps_mean: flo
         old_mean: μ_o, broadcastable with ``mean``.
         old_chol: lower Cholesky factor of Σ_o, shape (..., d, d), shared by the n rows.
         eps_mean: ε_μ > 0, a bound on the ½-scaled Mahalanobis distance m.
+        check: validate the inputs (False: the caller vouches for them, e.g. an update loop
+            whose inputs come from its own networks).
 
     Returns:
         μ̃ with the broadcast shape of ``mean`` and ``old_mean``.
     """
-    eps = _check_eps(eps_mean, "eps_mean")
-    _check_mean(mean, "mean")
-    _check_mean(old_mean, "old_mean")
-    _check_chol(old_chol, "old_chol")
-    _check_same({"mean": mean, "old_mean": old_mean, "old_chol": old_chol})
-    _broadcast({"mean": mean.shape, "old_mean": old_mean.shape})
+    eps = _check_eps(eps_mean, "eps_mean") if check else float(eps_mean)
+    if check:
+        _check_mean(mean, "mean")
+        _check_mean(old_mean, "old_mean")
+        _check_chol(old_chol, "old_chol")
+        _check_same({"mean": mean, "old_mean": old_mean, "old_chol": old_chol})
+        _broadcast({"mean": mean.shape, "old_mean": old_mean.shape})
     m = _mean_part(mean, old_mean, old_chol)
     active = m > eps
     omega = torch.sqrt(torch.where(active, m, torch.full_like(m, eps)) / eps) - 1
@@ -240,58 +258,92 @@ def _whitened_eigenvalues(chol: Tensor, old_chol: Tensor) -> Tensor:
     return torch.linalg.svdvals(M).square()
 
 
-def _cov_part_eta(eta: Tensor, lam: Tensor) -> tuple[Tensor, Tensor]:
+def _cov_part_eta(eta: np.ndarray, lam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """C(Σ̃(η)) and dC/dη from the whitened eigenvalues λ (shapes (N,) and (N, d))."""
-    e = eta.unsqueeze(-1)
-    u = (lam - 1) / (e * lam + 1)
-    c = 0.5 * _phi(u).sum(-1)
-    dc = -0.5 * ((lam - 1).square() / ((e + 1) * (e * lam + 1).square())).sum(-1)
+    e = eta[:, None]
+    den = e * lam + 1
+    a = lam - 1
+    c = 0.5 * _phi(a / den, np).sum(-1)
+    dc = -0.5 * (a * a / ((e + 1) * den * den)).sum(-1)
     return c, dc
 
 
-def _solve_eta(lam: Tensor, eps: float) -> tuple[Tensor, Tensor]:
-    """Root η* of C(Σ̃(η)) = ε per row of λ (float64, no grad); returns (η*, ok)."""
+def _solve_eta(lam: np.ndarray, eps: float, c0: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Root η* of C(Σ̃(η)) = ε per row of λ; returns (η*, ok).
+
+    In numpy, float64: a few dozen elementwise operations on (N, d) per step, which numpy
+    does at a fraction of PyTorch's cost per operation. ``c0`` = C(Σ) (η = 0). The
+    iteration starts at η = √(C(Σ)/ε) − 1, the root where Σ ≈ Σ_o (u_i ≈ (λ_i − 1)/(η + 1),
+    so C(Σ̃(η)) ≈ C(Σ)/(η + 1)², as for the mean), which is where a trust region keeps the
+    iterates.
+    """
     log_eps = math.log(eps)
 
-    def h(t: Tensor) -> tuple[Tensor, Tensor]:  # log C − log ε and its derivative in t = log η
-        eta = torch.exp(t)
+    def h(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # log C − log ε, d/dt, t = log η
+        eta = np.exp(t)
         c, dc = _cov_part_eta(eta, lam)
-        return torch.log(c) - log_eps, eta * dc / c
+        return np.log(c) - log_eps, eta * dc / c
 
     n = lam.shape[0]
-    lo = torch.full((n,), _LOG_ETA_MIN, dtype=lam.dtype, device=lam.device)
-    hi = torch.full((n,), _LOG_ETA_MAX, dtype=lam.dtype, device=lam.device)
-    h_hi, _ = h(hi)
-    ok = torch.isfinite(h_hi) & (h_hi <= 0)  # a feasible η exists in the bracket
-    t = torch.zeros_like(lo)  # η = 1
-    done = ~ok
-    for _ in range(_MAX_ITER):
-        hv, dh = h(t)
-        done = done | (hv.abs() <= _ROOT_TOL) | (hi - lo <= _ROOT_TOL)
-        if bool(done.all()):
-            break
-        run = ~done
-        lo = torch.where(run & (hv > 0), t, lo)  # C too large: η must grow
-        hi = torch.where(run & (hv < 0), t, hi)
-        newton = t - hv / dh
-        inside = torch.isfinite(newton) & (newton > lo) & (newton < hi)
-        t = torch.where(run, torch.where(inside, newton, 0.5 * (lo + hi)), t)
-    hv, _ = h(t)
-    t = torch.where(hv <= _ROOT_TOL, t, hi)  # otherwise the feasible end of the bracket
-    eta = torch.exp(t)
-    return eta, ok & torch.isfinite(eta)
+    with np.errstate(all="ignore"):
+        lo = np.full(n, _LOG_ETA_MIN)
+        hi = np.full(n, _LOG_ETA_MAX)
+        h_hi, _ = h(hi)
+        ok = np.isfinite(h_hi) & (h_hi <= 0)  # a feasible η exists in the bracket
+        t = np.clip(np.log(np.maximum(np.sqrt(c0 / eps) - 1, 1e-12)), lo, hi)
+        t = np.where(np.isfinite(t), t, 0.0)
+        done = ~ok
+        for _ in range(_MAX_ITER):
+            hv, dh = h(t)
+            done = done | (np.abs(hv) <= _ROOT_TOL) | (hi - lo <= _ROOT_TOL)
+            if done.all():
+                break
+            run = ~done
+            lo = np.where(run & (hv > 0), t, lo)  # C too large: η must grow
+            hi = np.where(run & (hv < 0), t, hi)
+            newton = t - hv / dh
+            inside = np.isfinite(newton) & (newton > lo) & (newton < hi)
+            t = np.where(run, np.where(inside, newton, 0.5 * (lo + hi)), t)
+        hv, _ = h(t)
+        t = np.where(hv <= _ROOT_TOL, t, hi)  # otherwise the feasible end of the bracket
+        eta = np.exp(t)
+    return eta, ok & np.isfinite(eta)
 
 
-def _interpolate(eta: Tensor, prec: Tensor, old_prec: Tensor) -> tuple[Tensor, Tensor]:
-    """Lower Cholesky factor of Σ̃(η) = (η + 1)(η Σ_o⁻¹ + Σ⁻¹)⁻¹ and a failure flag."""
+def _interpolate(
+    eta: Tensor, prec: Tensor, old_prec: Tensor
+) -> tuple[Tensor, Tensor, Tensor, Tensor]:
+    """Σ̃(η) = (η + 1)(η Σ_o⁻¹ + Σ⁻¹)⁻¹: its lower Cholesky factor, Σ̃ itself, the factor of
+    Σ̃⁻¹ and a failure flag."""
     e = eta[..., None, None]
-    lam_chol, info1 = torch.linalg.cholesky_ex((e * old_prec + prec) / (e + 1))
-    cov = torch.cholesky_inverse(lam_chol)
+    prec_chol, info1 = torch.linalg.cholesky_ex((e * old_prec + prec) / (e + 1))
+    cov = torch.cholesky_inverse(prec_chol)
     chol, info2 = torch.linalg.cholesky_ex(cov)
-    return chol, (info1 != 0) | (info2 != 0)
+    return chol, cov, prec_chol, (info1 != 0) | (info2 != 0)
 
 
-def project_cov(chol: Tensor, old_chol: Tensor, eps_cov: float) -> Tensor:
+def _cov_part_from(cov: Tensor, prec_chol: Tensor, old_prec: Tensor, old_chol: Tensor) -> Tensor:
+    """C(Σ̃) = ½[tr(Σ_o⁻¹Σ̃) − d + log|Σ_o| − log|Σ̃|] from Σ̃ and the factor of Σ̃⁻¹."""
+    log_diag = torch.log(torch.diagonal(prec_chol, dim1=-2, dim2=-1)).sum(-1)  # −½ log|Σ̃|
+    old_log_diag = torch.log(torch.diagonal(old_chol, dim1=-2, dim2=-1)).sum(-1)  # ½ log|Σ_o|
+    trace = (old_prec * cov).sum((-2, -1))
+    return 0.5 * (trace - cov.shape[-1]) + old_log_diag + log_diag
+
+
+def _chol_slope(chol: Tensor, cov: Tensor, old_prec: Tensor, eta: Tensor) -> Tensor:
+    """dL̃/dη of L̃ = chol(Σ̃(η)) at fixed Σ, Σ_o (no grad).
+
+    dΣ̃/dη = (Σ̃ − Σ̃ Σ_o⁻¹ Σ̃)/(η + 1), and a Cholesky factor moves as
+    dL̃ = L̃ Φ(L̃⁻¹ dΣ̃ L̃⁻ᵀ), Φ = the lower triangle with the diagonal halved.
+    """
+    dcov = (cov - cov @ old_prec @ cov) / (eta[..., None, None] + 1)
+    half = torch.linalg.solve_triangular(chol, dcov, upper=False)
+    x = torch.linalg.solve_triangular(chol, half.mT, upper=False)
+    phi = torch.tril(x, -1) + 0.5 * torch.diag_embed(torch.diagonal(x, dim1=-2, dim2=-1))
+    return chol @ phi
+
+
+def project_cov(chol: Tensor, old_chol: Tensor, eps_cov: float, *, check: bool = True) -> Tensor:
     """Project Σ onto {Σ̃ : C(Σ̃) ≤ ε_Σ}, minimising KL(N(0, Σ̃) ‖ N(0, Σ)); returns chol(Σ̃).
 
     Where C(Σ) ≤ ε_Σ the output is ``chol`` itself (identity, also for gradients); elsewhere
@@ -306,39 +358,51 @@ def project_cov(chol: Tensor, old_chol: Tensor, eps_cov: float) -> Tensor:
         chol: lower Cholesky factor of Σ, shape (..., d, d).
         old_chol: lower Cholesky factor of Σ_o, shape (..., d, d) (broadcasts with ``chol``).
         eps_cov: ε_Σ > 0, the bound on the covariance part C of the KL.
+        check: validate the inputs (see :func:`project_mean`).
 
     Returns:
         The projected lower Cholesky factor, broadcast shape, dtype of ``chol``.
     """
-    eps = _check_eps(eps_cov, "eps_cov")
-    _check_chol(chol, "chol")
-    _check_chol(old_chol, "old_chol")
-    d = _check_same({"chol": chol, "old_chol": old_chol})
+    eps = _check_eps(eps_cov, "eps_cov") if check else float(eps_cov)
+    d = chol.shape[-1]
+    if check:
+        _check_chol(chol, "chol")
+        _check_chol(old_chol, "old_chol")
+        d = _check_same({"chol": chol, "old_chol": old_chol})
     batch = _broadcast({"chol": chol.shape[:-2], "old_chol": old_chol.shape[:-2]})
     dtype = chol.dtype
     L = chol.to(torch.float64).expand(*batch, d, d)
     L_old = old_chol.to(torch.float64).expand(*batch, d, d)
 
-    with torch.no_grad():
-        lam = _whitened_eigenvalues(L, L_old)
-        c0, _ = _cov_part_eta(torch.zeros(batch, dtype=lam.dtype, device=lam.device), lam)
-        active = c0 > eps
-    if not bool(active.any()):
+    with torch.no_grad():  # the multiplier, in numpy on the whitened eigenvalues (N, d)
+        lam = _whitened_eigenvalues(L, L_old).reshape(-1, d).cpu().numpy()
+        c0, _ = _cov_part_eta(np.zeros(len(lam)), lam)
+        active_np = c0 > eps
+    if not active_np.any():
         return chol.expand(*batch, d, d).clone()
+    with np.errstate(all="ignore"):
+        eta_np, ok_np = np.zeros(len(lam)), np.zeros(len(lam), dtype=bool)
+        eta_np[active_np], ok_np[active_np] = _solve_eta(lam[active_np], eps, c0[active_np])
+        eta_np = np.where(active_np & ok_np, eta_np, 0.0)
+        _, slope_np = _cov_part_eta(eta_np, lam)
+
+    def tensor(x: np.ndarray) -> Tensor:
+        return torch.from_numpy(x).to(L.device).reshape(batch)
+
+    active, eta, slope = tensor(active_np), tensor(eta_np), tensor(slope_np)
+    use = active & tensor(ok_np)
+    prec, old_prec = torch.cholesky_inverse(L), torch.cholesky_inverse(L_old)
+    root, cov, prec_chol, failed = _interpolate(eta, prec, old_prec)
     with torch.no_grad():
-        eta = torch.zeros_like(c0)
-        ok = torch.zeros_like(active)
-        eta[active], ok[active] = _solve_eta(lam[active], eps)
-        use = active & ok
-        eta = torch.where(use, eta, torch.zeros_like(eta))
-        _, slope = _cov_part_eta(eta, lam)
-        prec, old_prec = torch.cholesky_inverse(L), torch.cholesky_inverse(L_old)
-        trial, failed = _interpolate(eta, prec, old_prec)
-        finite = torch.isfinite(trial).all(-1).all(-1)
-        use = use & ~failed & finite & torch.isfinite(slope) & (slope < 0)
+        finite = torch.isfinite(root).all(-1).all(-1)
+        good = use & ~failed & finite & torch.isfinite(slope) & (slope < 0)
+        redo = bool((good != use).any())
+        use = good
         eta = torch.where(use, eta, torch.zeros_like(eta))
         slope = torch.where(use, slope, -torch.ones_like(slope))
         n_failed = int((active & ~use).sum())
+    if redo:  # entries whose factorisation failed: evaluated at η = 0 (then discarded)
+        root, cov, prec_chol, _ = _interpolate(eta, prec, old_prec)
     if n_failed:
         warnings.warn(
             f"project_cov: {n_failed} of {active.numel()} covariance projections failed; "
@@ -347,12 +411,15 @@ def project_cov(chol: Tensor, old_chol: Tensor, eps_cov: float) -> Tensor:
             stacklevel=2,
         )
 
-    # η with value η* and derivative −(∂C/∂x)/(∂C/∂η) (implicit function theorem)
-    prec, old_prec = torch.cholesky_inverse(L), torch.cholesky_inverse(L_old)
-    chol_at_root, _ = _interpolate(eta, prec, old_prec)
-    c_root = _cov_part(chol_at_root, L_old)
-    eta_implicit = eta + (c_root.detach() - c_root) / slope
-    projected, _ = _interpolate(eta_implicit, prec, old_prec)
+    # L̃(η*) + dL̃/dη · (η − sg(η)) with η = η* − (C − sg(C))/(∂C/∂η): the value of L̃(η*),
+    # the derivative ∂L̃/∂x + ∂L̃/∂η · dη*/dx with dη*/dx = −(∂C/∂x)/(∂C/∂η) (implicit
+    # function theorem), C = C(Σ̃(η*)) as a function of the inputs x at fixed η*
+    c_root = _cov_part_from(cov, prec_chol, old_prec, L_old)
+    with torch.no_grad():
+        chol_slope = _chol_slope(root, cov, old_prec, eta)
+        chol_slope = torch.where(use[..., None, None], chol_slope, torch.zeros_like(chol_slope))
+    d_eta = (c_root.detach() - c_root) / slope  # value 0
+    projected = root + chol_slope * d_eta[..., None, None]
     keep = torch.where((active & ~use)[..., None, None], L_old, L)
     return torch.where(use[..., None, None], projected, keep).to(dtype)
 
@@ -367,6 +434,8 @@ def project(
     old_chol: Tensor,
     eps_mean: float,
     eps_cov: float,
+    *,
+    check: bool = True,
 ) -> tuple[Tensor, Tensor]:
     """Project N(μ, LLᵀ) into the trust region around N(μ_o, L_o L_oᵀ): (μ̃, L̃).
 
@@ -375,12 +444,14 @@ def project(
     Shapes as in :func:`kl_parts`, e.g. ``mean`` (K, B, d) and ``chol`` (K, d, d).
     """
     return (
-        project_mean(mean, old_mean, old_chol, eps_mean),
-        project_cov(chol, old_chol, eps_cov),
+        project_mean(mean, old_mean, old_chol, eps_mean, check=check),
+        project_cov(chol, old_chol, eps_cov, check=check),
     )
 
 
-def trust_region_loss(mean: Tensor, proj_mean: Tensor, proj_chol: Tensor) -> Tensor:
+def trust_region_loss(
+    mean: Tensor, proj_mean: Tensor, proj_chol: Tensor, *, check: bool = True
+) -> Tensor:
     """Trust-region regression term of the expert loss, mean part: mean_n m(μ ‖ sg(μ̃)).
 
     ½ (μ − sg(μ̃))ᵀ Σ̃⁻¹ (μ − sg(μ̃)) with Σ̃ = sg(L̃ L̃ᵀ), averaged over the batch axis −2 of
@@ -390,14 +461,16 @@ def trust_region_loss(mean: Tensor, proj_mean: Tensor, proj_chol: Tensor) -> Ten
         mean: the network's mean μ, shape (..., n, d).
         proj_mean: the projected mean μ̃, broadcastable with ``mean``.
         proj_chol: the projected Cholesky factor L̃, shape (..., d, d).
+        check: validate the inputs (see :func:`project_mean`).
 
     Returns:
         Shape ``mean.shape[:-2]`` (one value per expert for ``mean`` (K, B, d)).
     """
-    _check_mean(mean, "mean")
-    _check_mean(proj_mean, "proj_mean")
-    _check_chol(proj_chol, "proj_chol")
-    _check_same({"mean": mean, "proj_mean": proj_mean, "proj_chol": proj_chol})
-    _broadcast({"mean": mean.shape, "proj_mean": proj_mean.shape})
+    if check:
+        _check_mean(mean, "mean")
+        _check_mean(proj_mean, "proj_mean")
+        _check_chol(proj_chol, "proj_chol")
+        _check_same({"mean": mean, "proj_mean": proj_mean, "proj_chol": proj_chol})
+        _broadcast({"mean": mean.shape, "proj_mean": proj_mean.shape})
     m = _mean_part(mean, proj_mean.detach(), proj_chol.detach())
     return m if mean.ndim == 1 else m.mean(-1)

@@ -47,12 +47,13 @@ def log_preference(model: Any, contexts: np.ndarray) -> np.ndarray:
     """
     if model.energies is None:
         raise ValueError("the model has no context distributions (BBRL): nothing to show")
-    c = torch.as_tensor(np.asarray(contexts, dtype=np.float64))
-    norm = torch.as_tensor(model.normaliser_contexts)
+    dtype = model.energies.dtype  # the networks' (config.dtype)
+    c = torch.as_tensor(np.asarray(contexts, dtype=np.float64), dtype=dtype)
+    norm = torch.as_tensor(model.normaliser_contexts, dtype=dtype)
     with torch.no_grad():
         e_norm = model.energies.energies(norm)
         log_mean_z = torch.logsumexp(e_norm, -1) - np.log(e_norm.shape[-1])
-        return (model.energies.energies(c) - log_mean_z[:, None]).numpy()
+        return (model.energies.energies(c) - log_mean_z[:, None]).double().numpy()
 
 
 def active_experts(model: Any, contexts: np.ndarray, threshold: float = 0.0) -> np.ndarray:
