@@ -135,9 +135,10 @@ def test_every_field_exists(tables: dict[str, pd.DataFrame]) -> None:
     broken = [Setting("s", "f", 1, "T", 1, "c", "no_such.attr", "Fig", "why")]
     with pytest.raises(AttributeError, match="no_such"):
         audit.audit_frame(broken, {"s": make_task("planar-reacher")})
-    from vslbook.experiments import audit_algorithms
+    from vslbook.experiments.audit_algorithms_ch3 import ch3_settings
+    from vslbook.experiments.audit_algorithms_ch4 import ch4_settings
 
-    settings = audit_algorithms.ch4_settings() + audit_algorithms.ch3_settings()
+    settings = ch4_settings() + ch3_settings()
     names = {
         f.name for cls in (type(diskill_config("mini-golf")),) for f in dataclasses.fields(cls)
     }

@@ -22,12 +22,11 @@ from vslbook.envs.robot.beer_pong import (
     MODEL_PATCHES,
     P_GAINS,
     Q0,
-    REWARD_VARIANTS,
     BeerPong,
-    beer_pong_reward,
     desired_trajectory,
     use_pd_actuators,
 )
+from vslbook.envs.robot.beer_pong_reward import REWARD_VARIANTS, beer_pong_reward
 from vslbook.envs.robot.primitives import promp_trajectory
 from vslbook.envs.robot.task import EpisodicEnv
 

@@ -28,7 +28,7 @@ from vslbook.bounds.dime_bridges import (
     sample_backward,
 )
 from vslbook.bounds.dime_bridges_linear import linear_bridge_closed_form
-from vslbook.bounds.dime_entropy import _single_thread
+from vslbook.bounds.dime_entropy import single_thread
 from vslbook.bounds.dime_linear_chain import AffineScore, linear_gaussian_chain
 from vslbook.srl.diffusion_policy import DiffusionPolicy, DiffusionPolicyConfig, ScoreNetwork
 
@@ -114,7 +114,7 @@ def check_dime_as_bridge(
     n_samples = _count("n_samples", n_samples, 10)
     to_bridge = bridge_of or policy_bridge
     rng = _rng(seed, 59)
-    with _single_thread():
+    with single_thread():
         # thesis notation, nonlinear score
         beta, delta, eta, n_steps = 0.8, 0.15, 1.4, 5
         score_c = rng.normal(size=2)

@@ -25,11 +25,11 @@ from vslbook.bounds._helpers import _count, _np, _rng, _worst
 from vslbook.bounds.dime_linear_chain import (
     AffineScore,
     LinearGaussianChain,
-    _kl,
-    _noising_joint,
     gaussian_entropy,
+    gaussian_kl_np,
     linear_gaussian_chain,
     linear_gaussian_policy,
+    noising_joint,
 )
 from vslbook.srl.diffusion_policy import DiffusionPolicy, PolicySample
 
@@ -40,6 +40,7 @@ __all__ = [
     "gaussian_entropy",
     "linear_gaussian_chain",
     "linear_gaussian_policy",
+    "single_thread",
 ]
 
 
@@ -48,7 +49,7 @@ def _log_normal(x: np.ndarray, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
 
 
 @contextmanager
-def _single_thread() -> Iterator[None]:
+def single_thread() -> Iterator[None]:
     """Run torch on one thread, restoring the previous setting afterwards.
 
     The chains here are tiny; on a loaded machine torch's thread pool costs far more than the
@@ -148,7 +149,7 @@ def check_entropy_lower_bound(
         ``series_gap``, ``series_bound_mc``, ``series_bound_stderr``, ``series_gap_zero_drift``
         (the gap of the same chain with ``f_theta = 0``).
     """
-    with _single_thread():
+    with single_thread():
         return _entropy_lower_bound(
             seed,
             n_steps,
@@ -210,12 +211,12 @@ def _entropy_lower_bound(
     # Eq. 5.20 and C.11 for a Gaussian target exp(Q)/Z, Q(a) = -sum_d (a_d - mu_d)^2 / (2 s_d^2).
     joint_target = []
     for j in range(d):
-        mean_f, cov_f = _noising_joint(
+        mean_f, cov_f = noising_joint(
             etas[:, j], sigma0, 0.0, 0.0, target_mean[j], target_std[j] ** 2
         )
         joint_target.append((mean_f, cov_f))
     kl_joint_target = float(
-        _kl(
+        gaussian_kl_np(
             chain.gen_mean,
             chain.gen_cov,
             np.stack([m for m, _ in joint_target]),
@@ -223,7 +224,7 @@ def _entropy_lower_bound(
         ).sum()
     )
     kl_marginal_target = float(
-        _kl(
+        gaussian_kl_np(
             chain.marginal_mean[:, None],
             chain.marginal_var[:, None, None],
             target_mean[:, None],

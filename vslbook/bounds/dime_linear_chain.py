@@ -26,8 +26,11 @@ __all__ = [
     "AffineScore",
     "LinearGaussianChain",
     "gaussian_entropy",
+    "gaussian_kl_np",
+    "generative_joint",
     "linear_gaussian_chain",
     "linear_gaussian_policy",
+    "noising_joint",
 ]
 
 
@@ -148,7 +151,7 @@ def gaussian_entropy(var: np.ndarray) -> float:
     return float(np.sum(0.5 * np.log(2 * math.pi * math.e * np.asarray(var, dtype=float))))
 
 
-def _generative_joint(
+def generative_joint(
     eta: np.ndarray, sigma0: float, slope: np.ndarray | float, offset: np.ndarray | float
 ) -> tuple[np.ndarray, np.ndarray]:
     """``X_0 = sigma0 e_0``, ``X_{k+1} = a_k X_k + eta_k offset_k + sqrt(2 eta_k) e_{k+1}``.
@@ -163,7 +166,7 @@ def _generative_joint(
     return _linear_gaussian_joint(coupling, shift, np.r_[sigma0, np.sqrt(2 * eta)])
 
 
-def _noising_joint(
+def noising_joint(
     eta: np.ndarray,
     sigma0: float,
     slope: np.ndarray | float,
@@ -182,7 +185,10 @@ def _noising_joint(
     return _linear_gaussian_joint(coupling, shift, np.r_[np.sqrt(2 * eta), math.sqrt(var0)])
 
 
-def _kl(mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray, cov_q: np.ndarray) -> np.ndarray:
+def gaussian_kl_np(
+    mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray, cov_q: np.ndarray
+) -> np.ndarray:
+    """Gaussian ``KL(p || q)`` on NumPy arrays, by :func:`vslbook.dists.gaussian_kl`."""
     return _np(gaussian_kl(_t(mean_p), _t(cov_p), _t(mean_q), _t(cov_q)))
 
 
@@ -229,9 +235,9 @@ def linear_gaussian_chain(
     for j in range(d):
         eta = etas[:, j]
         g_slope, g_offset, n_slope, n_offset = (p[:, j] for p in params)
-        mean_g, cov_g = _generative_joint(eta, sigma0, g_slope, g_offset)
+        mean_g, cov_g = generative_joint(eta, sigma0, g_slope, g_offset)
         m0, v0 = mean_g[-1], cov_g[-1, -1]
-        mean_f, cov_f = _noising_joint(eta, sigma0, n_slope, n_offset, m0, v0)
+        mean_f, cov_f = noising_joint(eta, sigma0, n_slope, n_offset, m0, v0)
         # u_k = X_k - c_k X_{k+1} - eta_k noise_offset, linear in the generative joint
         c = 1 + eta * (n_slope - 1 / sigma0**2)
         rows = np.zeros((n, n + 1))
@@ -253,6 +259,8 @@ def linear_gaussian_chain(
         ):
             fields[key].append(value)
     fields["kl"] = list(
-        _kl(*(np.stack(fields[k]) for k in ("gen_mean", "gen_cov", "noising_mean", "noising_cov")))
+        gaussian_kl_np(
+            *(np.stack(fields[k]) for k in ("gen_mean", "gen_cov", "noising_mean", "noising_cov"))
+        )
     )
     return LinearGaussianChain(**{k: np.array(v) for k, v in fields.items()})

@@ -17,7 +17,7 @@ from functools import cache
 import numpy as np
 from scipy.optimize import minimize_scalar
 
-from vslbook.bounds.dime_linear_chain import _generative_joint, _kl, _noising_joint
+from vslbook.bounds.dime_linear_chain import gaussian_kl_np, generative_joint, noising_joint
 
 
 def _features(s: np.ndarray | float, a: np.ndarray | float) -> np.ndarray:
@@ -229,7 +229,7 @@ class _Target:
         if not q[2] < 0:
             return None  # exp(Q / alpha) is not normalisable in a
         var = -alpha / (2 * q[2])
-        unit, cov = _noising_joint(eta, sigma0, 0.0, 0.0, 1.0, var)
+        unit, cov = noising_joint(eta, sigma0, 0.0, 0.0, 1.0, var)
         return cls(-q[4] / (2 * q[2]), -q[1] / (2 * q[2]), var, unit, cov)
 
     def means(self, states: np.ndarray) -> np.ndarray:
@@ -242,17 +242,19 @@ def _joint_kls(
 ) -> np.ndarray:
     """``KL(pi~_{0:N}(.|s) || ->pi_{0:N}(.|s))`` of Eq. 5.22 at each state (Section 5.4.1's joints).
 
-    The generative joints come from :func:`~vslbook.bounds.dime_entropy._generative_joint`
+    The generative joints come from :func:`~vslbook.bounds.dime_linear_chain.generative_joint`
     and the divergence from :func:`vslbook.dists.gaussian_kl`, not from :meth:`_ChainFamily.maps`.
     """
     slope = family.split(theta)[0]
     joints = [
-        _generative_joint(family.eta, family.sigma0, slope, off)
+        generative_joint(family.eta, family.sigma0, slope, off)
         for off in family.offsets(theta, states)
     ]
     mean = np.stack([m for m, _ in joints])
     cov = np.stack([c for _, c in joints])
-    return _kl(mean, cov, target.means(states), np.repeat(target.cov[None], len(joints), 0))
+    return gaussian_kl_np(
+        mean, cov, target.means(states), np.repeat(target.cov[None], len(joints), 0)
+    )
 
 
 def _improve_exact(

@@ -7,8 +7,9 @@ that reproduces a figure uses the code's choice by default and keeps the text's 
 option. This module lays the three side by side, one row per setting:
 
 * ``thesis`` and ``authors' code``: values typed into :mod:`vslbook.experiments.audit_tasks`
-  and :mod:`vslbook.experiments.audit_algorithms`, each with where it was read (table,
-  section, equation; repository, path, line), or ``"not found"`` / ``"not stated"``;
+  and :mod:`vslbook.experiments.audit_algorithms_ch3` / :mod:`~.audit_algorithms_ch4`, each
+  with where it was read (table, section, equation; repository, path, line), or
+  ``"not found"`` / ``"not stated"``;
 * ``ours``: read at run time from the package's objects (task instances of
   :func:`vslbook.envs.robot.make_task`, :func:`vslbook.erl.diskill_config.diskill_config`,
   :func:`vslbook.erl.svsl_config.svsl_config`, the HiREPS / LaDiPS presets, the PPO
@@ -220,12 +221,15 @@ def algorithm_audit(chapter: int, configs: Mapping[str, Any] | None = None) -> p
         configs: subject (``"method/task"``, see the table's ``subject`` column) → a
             configuration object to audit instead of the package's preset.
     """
-    from vslbook.experiments import audit_algorithms as a
+    from vslbook.experiments import audit_algorithms_ch3 as ch3
+    from vslbook.experiments import audit_algorithms_ch4 as ch4
 
     if chapter not in (3, 4):
         raise ValueError(f"chapter must be 3 or 4, got {chapter!r}")
     settings, objects = (
-        (a.ch3_settings(), a.ch3_configs()) if chapter == 3 else (a.ch4_settings(), a.ch4_configs())
+        (ch3.ch3_settings(), ch3.ch3_configs())
+        if chapter == 3
+        else (ch4.ch4_settings(), ch4.ch4_configs())
     )
     extra = dict(configs or {})
     unknown = sorted(set(extra) - set(objects))
