@@ -75,7 +75,7 @@ from vslbook.experiments.svsl_context import (
     success_grid,
     svsl_episodes,
 )
-from vslbook.progress import progress_bar
+from vslbook.progress import progress_bar, run_set_progress
 from vslbook.results import RunDir
 from vslbook.stats import iqm_curve
 
@@ -97,6 +97,7 @@ __all__ = [
     "method_config",
     "mixture_of",
     "run_method",
+    "run_methods",
     "shared_task",
     "success_grid",
     "svsl_episodes",
@@ -107,6 +108,21 @@ __all__ = [
 # --------------------------------------------------------------------------------------
 # runs
 # --------------------------------------------------------------------------------------
+def run_methods(
+    task: str, root: str | Path, budget: Budget | str | None, methods: Sequence[str],
+    seeds: int, label: str, *, progress: bool = False,
+) -> dict[str, list[Path]]:  # fmt: skip
+    """:func:`run_method` for every method and seeds 0, …, ``seeds`` − 1, one after the
+    other, as one run set (one line ``label`` on the book's pages); ``{method: [run
+    directories]}``."""
+    for m in methods:
+        check_method(m)
+    n = check_count("seeds", seeds)
+    with run_set_progress(label):
+        return {m: [run_method(task, m, s, root, budget, progress=progress) for s in range(n)]
+                for m in methods}  # fmt: skip
+
+
 def run_method(
     task: str, method: str, seed: int, root: str | Path, budget: Budget | str | None = None,
     *, progress: bool = False,

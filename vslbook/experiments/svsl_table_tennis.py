@@ -62,7 +62,6 @@ from vslbook.experiments.svsl_mixtures import (
     mixture_of,
     svsl_episodes,
 )
-from vslbook.progress import run_set_progress
 
 __all__ = [
     "METHODS",
@@ -209,12 +208,8 @@ def run_all(
 ) -> dict[str, list[Path]]:
     """Every method for seeds 0, …, ``seeds`` − 1 (default: the budget's), one after the
     other; returns ``{method: [run directories]}`` for :func:`learning_curves`."""
-    for m in methods:
-        mx.check_method(m)
-    n = table_tennis_counts(budget)["seeds"] if seeds is None else mx.check_count("seeds", seeds)
-    with run_set_progress("table tennis runs"):  # one line per set on the book's pages
-        return {m: [run_table_tennis(m, s, root, budget, progress=progress) for s in range(n)]
-                for m in methods}  # fmt: skip
+    n = table_tennis_counts(budget)["seeds"] if seeds is None else seeds
+    return mx.run_methods(TASK, root, budget, methods, n, "table tennis runs", progress=progress)
 
 
 # --------------------------------------------------------------------------------------
