@@ -1,6 +1,9 @@
 # vslbook: two commands.
-#   make book   set up .venv and build the book site, every notebook executed at
-#               $(VSLBOOK_BUDGET) (default: reduced), into build/site/
+#   make book   set up .venv and build the book site into build/site/: the figures read the
+#               recorded results of data/results/ (or finished runs in runs/; smoke runs
+#               trained now where neither exists), the rest executes at reduced.
+#               VSLBOOK_BUDGET=B trains what B lacks (build/site-B/); RETRAIN=1 trains
+#               every run of the budget, after printing the core-hours (vslbook plan).
 #   make test   set up .venv and run the tests, notebooks and the site's browser test
 #               included, at the smoke budget
 # Setup is idempotent: the stamp .venv/.installed is rebuilt only when pyproject.toml or
@@ -28,7 +31,8 @@ SUDO := $(shell [ "$$(id -u)" = 0 ] || echo sudo)
 GL_PKGS := libosmesa6
 NB_SRC := $(sort $(wildcard notebooks/[0-9][0-9]_*.py))
 NB_IPY := $(NB_SRC:.py=.ipynb)
-VSLBOOK_BUDGET ?= reduced
+VSLBOOK_BUDGET ?=
+RETRAIN ?=
 export MPLBACKEND ?= Agg
 export MUJOCO_GL ?= disable
 export PYTHONHASHSEED := 0
@@ -37,7 +41,8 @@ export PYTHONHASHSEED := 0
 .DEFAULT_GOAL := help
 
 help:
-	@echo "make book   build the book site at VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) into build/site/"
+	@echo "make book   build the book site from recorded results into build/site/"
+	@echo "            (VSLBOOK_BUDGET=smoke|reduced|full: that budget; RETRAIN=1: train it all)"
 	@echo "make test   run the test suite, notebooks and the site browser test included (smoke budget)"
 	@echo "make lab    open JupyterLab on notebooks/"
 	@echo "make lint   ruff"
@@ -95,8 +100,8 @@ notebooks: $(NB_IPY)
 # The site: Sphinx + MyST-NB executes each notebook at the budget (cached per budget, so an
 # unchanged notebook is not run again) and ends by printing the page to open.
 book: setup
-	VSLBOOK_BUDGET=$(VSLBOOK_BUDGET) VSLBOOK_FIGURES=$(CURDIR)/build/figures \
-	  $(BIN)/python book/build.py --budget $(VSLBOOK_BUDGET)
+	VSLBOOK_FIGURES=$(CURDIR)/build/figures $(BIN)/python book/build.py \
+	  $(if $(VSLBOOK_BUDGET),--budget $(VSLBOOK_BUDGET)) $(if $(RETRAIN),--retrain)
 
 site: book
 

@@ -1,13 +1,24 @@
-"""Build the vslbook site: ``python book/build.py [--budget B]`` (what ``make book`` runs).
+"""Build the vslbook site: ``python book/build.py [--budget B] [--retrain]`` (``make book``).
+
+Where the long run sets come from (:mod:`vslbook.experiments.figure_sources`):
+
+* no ``--budget`` (``make book``): each figure draws its recorded runs (``data/results/``,
+  the largest budget recorded) or the finished runs of ``runs/``; a figure with neither
+  trains its runs now at ``smoke`` and says so. The rest of the book (derivations, checks,
+  cheap live runs) executes at ``reduced``. The site goes to ``build/site/``.
+* ``--budget B`` (``make book VSLBOOK_BUDGET=B``): the same at B alone; a figure with
+  nothing recorded or finished at B trains its runs at B. Into ``build/site-B/``.
+* ``--retrain`` (``make book RETRAIN=1``): every run of the budget is trained (finished ones
+  reused); the core-hours that takes are printed first (``vslbook plan``).
 
 1. Stage the sources in ``build/book-src/``: the jupytext notebooks of ``notebooks/`` as
    ``.ipynb`` (``00_index`` becomes the landing page ``index``, with the table of contents
    appended),
    the pages of ``book/`` and a MathJax 3 copy, so the site typesets math offline.
-2. Run Sphinx (MyST-NB, sphinx-book-theme) into ``build/site/`` (``build/site-<budget>/``
-   for a budget other than ``reduced``). Each notebook executes at the budget through a
-   jupyter-cache store of that budget (``build/book-cache/<budget>``): a notebook whose
-   code has not changed is not executed again.
+2. Run Sphinx (MyST-NB, sphinx-book-theme) into the site's folder. Each notebook executes
+   through a jupyter-cache store of that build (``build/book-cache/<label>``): a notebook
+   whose code has not changed is not executed again, unless the recorded results changed
+   (the cache's stamp holds their registries' fingerprint, :func:`cache_stamp`).
 3. Print the page to open.
 
 A failing check inside a notebook fails the build (``nb_execution_raise_on_error``), and
@@ -46,9 +57,54 @@ CACHE_FORMAT = "progress=summary"
 CACHE_STAMP = "vslbook-cache-format.txt"
 
 
-def site_dir(budget: str) -> Path:
-    """Where the site of ``budget`` is written."""
-    return ROOT / "build" / ("site" if budget == "reduced" else f"site-{budget}")
+def build_label(budget: str | None, retrain: bool = False) -> str:
+    """The name of a build: ``default`` (no budget named), the budget, ``<budget>-retrain``."""
+    if retrain:
+        return f"{budget or 'reduced'}-retrain"
+    return budget or "default"
+
+
+def site_dir(budget: str | None, retrain: bool = False) -> Path:
+    """Where a site is written: ``build/site`` for ``make book``, else ``build/site-<label>``."""
+    label = build_label(budget, retrain)
+    return ROOT / "build" / ("site" if label == "default" else f"site-{label}")
+
+
+def results_fingerprint() -> str:
+    """sha256 over the registries of ``data/results/`` (changes whenever a set is recorded)."""
+    import hashlib
+
+    digest = hashlib.sha256()
+    results = ROOT / "data" / "results"
+    for reg in sorted(results.rglob("registry.json")) if results.is_dir() else ():
+        digest.update(str(reg.relative_to(results)).encode() + b"\0" + reg.read_bytes())
+    return digest.hexdigest()
+
+
+def cache_stamp(retrain: bool) -> str:
+    """What a cache's outputs were made with: :data:`CACHE_FORMAT` and, unless retraining,
+    the recorded results (:func:`results_fingerprint`) the figures read."""
+    return CACHE_FORMAT if retrain else f"{CACHE_FORMAT} results={results_fingerprint()[:16]}"
+
+
+def retrain_estimate(budget: str, root: Path) -> str:
+    """What ``make book RETRAIN=1`` will train: core-hours per figure (``vslbook plan``)."""
+    import math
+
+    from vslbook.experiments.run_plan import FIGURE_MODULES, plan
+
+    lines, total, untimed = [], 0.0, 0
+    for figure in FIGURE_MODULES:
+        todo = [r for r in plan(figure, budget, root) if r.state in ("partial", "missing")]
+        hours = sum(r.hours_left for r in todo if not math.isnan(r.hours_left))
+        unknown = sum(math.isnan(r.hours_left) for r in todo)
+        total, untimed = total + hours, untimed + unknown
+        note = f", {unknown} not yet timed" if unknown else ""
+        lines.append(f"  {figure}: {len(todo)} runs to train, {hours:.1f} core-hours{note}")
+    lines.append(f"retraining at {budget}: {total:.1f} core-hours measured"
+                 + (f" plus {untimed} runs not yet timed" if untimed else "")
+                 + " (Chapter 5's runs are not in the plan)")
+    return "\n".join(lines)
 
 
 def find_mathjax() -> Path:
@@ -131,44 +187,53 @@ def progress_mode_for_site() -> str:
     return "off" if os.environ.get("VSLBOOK_PROGRESS", "").strip().lower() == "off" else "summary"
 
 
-def prepare_cache(cache: Path) -> None:
-    """Empty ``cache`` if its outputs were made in another format (:data:`CACHE_FORMAT`)."""
+def prepare_cache(cache: Path, stamp_text: str = CACHE_FORMAT) -> None:
+    """Empty ``cache`` if its outputs were made otherwise (another :data:`CACHE_FORMAT`, or
+    other recorded results, :func:`cache_stamp`)."""
     stamp = cache / CACHE_STAMP
     if cache.exists() and any(cache.iterdir()):
-        if stamp.is_file() and stamp.read_text().strip() == CACHE_FORMAT:
+        if stamp.is_file() and stamp.read_text().strip() == stamp_text:
             return
-        print(f"{cache}: its outputs predate {CACHE_FORMAT!r} (e.g. progress bars frozen on "
-              "the page); emptied, every notebook executes again (finished runs are reused)")
+        print(f"{cache}: its outputs were made with other recorded results or in another "
+              "format; emptied, every notebook executes again (finished runs are reused)")
         shutil.rmtree(cache)
     cache.mkdir(parents=True, exist_ok=True)
-    stamp.write_text(CACHE_FORMAT + "\n")
+    stamp.write_text(stamp_text + "\n")
 
 
-def build(budget: str, *, quiet: bool = False) -> Path:
-    """Build the site of ``budget``; return its landing page."""
-    if budget not in BUDGETS:
+def build(budget: str | None = None, *, retrain: bool = False, quiet: bool = False) -> Path:
+    """Build the site (see the module's docstring); return its landing page.
+
+    ``budget``: None builds the default book (recorded results, the rest at ``reduced``).
+    """
+    if budget is not None and budget not in BUDGETS:
         raise ValueError(f"budget {budget!r} is not one of {BUDGETS}")
     from sphinx.cmd.build import build_main
 
+    label = build_label(budget, retrain)
+    live = budget or "reduced"
+    if retrain:
+        print(retrain_estimate(live, ROOT / "runs"), flush=True)
     work = ROOT / "build" / "book-src"
-    src, static = work / budget / "src", work / budget / "static"
+    src, static = work / label / "src", work / label / "static"
     stage(src)
     stage_static(static)
-    out = site_dir(budget)
-    os.environ["VSLBOOK_BUDGET"] = budget
+    out = site_dir(budget, retrain)
+    os.environ["VSLBOOK_BUDGET"] = live
+    os.environ["VSLBOOK_SOURCE"] = "retrain" if retrain else ("budget" if budget else "best")
     os.environ["VSLBOOK_BOOK_STATIC"] = str(static)
-    cache = ROOT / "build" / "book-cache" / budget
-    prepare_cache(cache)
+    cache = ROOT / "build" / "book-cache" / label
+    prepare_cache(cache, cache_stamp(retrain))
     os.environ["VSLBOOK_BOOK_CACHE"] = str(cache)
     # one plain line per run set instead of progress bars frozen on the page
     os.environ["VSLBOOK_PROGRESS"] = progress_mode_for_site()
-    os.environ.setdefault("VSLBOOK_BOOK_TIMEOUT", "2400" if budget == "smoke" else "-1")
+    os.environ.setdefault("VSLBOOK_BOOK_TIMEOUT", "2400" if live == "smoke" else "-1")
     os.environ.setdefault("VSLBOOK_FIGURES", str(ROOT / "build" / "figures"))
     # The kernels draw inline (figures become page images), whatever a caller exported for
     # headless scripts (the Makefile exports MPLBACKEND=Agg for the tests).
     os.environ["MPLBACKEND"] = "module://matplotlib_inline.backend_inline"
     os.environ.setdefault("MUJOCO_GL", "disable")
-    args = ["-b", "html", "-c", str(BOOK), "-d", str(work / budget / "doctrees"),
+    args = ["-b", "html", "-c", str(BOOK), "-d", str(work / label / "doctrees"),
             "-W", "--keep-going", "-j", "1",
             str(src), str(out)]
     if quiet:
@@ -176,19 +241,22 @@ def build(budget: str, *, quiet: bool = False) -> Path:
     t0 = time.perf_counter()
     rc = build_main(args)
     if rc != 0:
-        raise SystemExit(f"the {budget} site did not build (sphinx exit {rc})")
+        raise SystemExit(f"the {label} site did not build (sphinx exit {rc})")
     index = out / "index.html"
-    print(f"{budget} site built in {time.perf_counter() - t0:.0f} s; open {index}")
+    print(f"{label} site built in {time.perf_counter() - t0:.0f} s; open {index}")
     return index
 
 
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--budget", default=os.environ.get("VSLBOOK_BUDGET", "reduced"),
-                        choices=BUDGETS)
+    parser.add_argument("--budget", default=os.environ.get("VSLBOOK_BUDGET") or None,
+                        choices=BUDGETS, help="train what is not recorded at this budget "
+                        "(default: recorded results, else smoke runs)")
+    parser.add_argument("--retrain", action="store_true",
+                        help="train every run of the budget (default reduced); prints the plan")
     parser.add_argument("-q", "--quiet", action="store_true")
     args = parser.parse_args(argv)
-    build(args.budget, quiet=args.quiet)
+    build(args.budget, retrain=args.retrain, quiet=args.quiet)
     return 0
 
 

@@ -222,7 +222,8 @@ vslbook.show_source(train)
 # %% [markdown]
 # Train one run per seed at the active budget. Each run writes a resumable run
 # directory under `runs/`; running the cell again reuses finished runs. The curves are
-# read back through the `data/results` tables (sha256-checked) and aggregated as the
+# read back through registered tables in `build/tables/` (sha256-checked; `data/results/`
+# holds only recorded run sets, `vslbook record`) and aggregated as the
 # interquartile mean with a 95 % stratified-bootstrap interval.
 
 # %%
@@ -234,7 +235,7 @@ runs = [
     run("erl-pg", "vslbook/PointReach-v0", seed=s, budget=budget, root=ROOT / "runs", progress=False)
     for s in range(budget.seeds)
 ]
-tables_dir = ROOT / "data" / "results" / f"ch2-erl-pg-{budget.name}"
+tables_dir = ROOT / "build" / "tables" / f"ch2-erl-pg-{budget.name}"
 collect_runs(runs, tables_dir)
 evals = load_table("evals.csv.gz", tables_dir)
 

@@ -55,7 +55,7 @@ budget = get_budget()
 use_style()
 ROOT = Path(vslbook.__file__).resolve().parents[1]
 RUNS = ROOT / "runs"
-TABLES = ROOT / "data" / "results"
+TABLES = ROOT / "build" / "tables"  # live runs' tables; data/results/ holds recorded sets
 print(f"budget: {budget.name} ({budget.seeds} seeds per configuration)")
 
 

@@ -12,6 +12,10 @@
     per run its config, seed, budget, code fingerprint (and the paths it left out), git
     sha and dirty flag, package versions, host, python and platform, start time, wall time
     and the date it was recorded;
+``checkpoints/<run>.pt.gz``
+    the final checkpoint of the first seed of each method and task
+    (:func:`vslbook.experiments.recorded_runs.record_checkpoints`), registered in
+    ``checkpoints/registry.json``;
 ``registry.json``
     the sha256 and row count of the three files (:func:`vslbook.data.register_file`), so
     a damaged or hand-edited table is an error, never a silently wrong plot.
@@ -24,7 +28,9 @@ and sessions: recording again merges with what the folder holds (the root's copy
 wins) and rewrites the tables deterministically; recording the same runs twice gives the
 same bytes.
 
-Reading: :func:`load_recorded` gives a figure's per-run metric frames, :func:`recorded_names`
+Reading: :func:`vslbook.experiments.recorded_runs.materialise` writes a set back as run
+directories (what the figures read, :mod:`vslbook.experiments.figure_sources`),
+:func:`load_recorded` gives a figure's per-run metric frames, :func:`recorded_names`
 the names in a set (``vslbook plan`` marks them ``recorded``), and :func:`result_rows`
 (``vslbook results``) the final IQM of every recorded (figure, method, budget) with a 95 %
 stratified-bootstrap CI over seeds and whether the code that made the runs has changed.
@@ -53,6 +59,7 @@ from vslbook.data import (
     results_dir,
     verify_file,
 )
+from vslbook.experiments.recorded_runs import record_checkpoints
 from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs
 from vslbook.jsonfiles import atomic_write, json_bytes
 from vslbook.provenance import code_fingerprint
@@ -347,6 +354,7 @@ def record(figure: str, budget: Budget | str | None = None,
         atomic_write(out / name, data)
         register_file(out / name, _DESCRIPTIONS[name])
     write_provenance(out, body)
+    record_checkpoints(out, fresh)
     return report
 
 

@@ -33,7 +33,8 @@ from typing import Any
 
 from vslbook.budget import Budget, get_budget
 
-__all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "plan_text"]
+__all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "plan_text",
+           "recorded_times"]
 
 #: figure id → the chapter module whose ``figure_runs(figure, budget)`` declares its runs
 FIGURE_MODULES: dict[str, str] = {
@@ -159,13 +160,18 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
 
     ``recorded(run)`` says whether a run missing from ``root`` is in ``data/results/``.
     A run's seconds per unit are its own median measurement, else the median of its
-    method's other runs in the plan, else NaN (not yet measured).
+    method's other runs in the plan, else of its method's recorded runs
+    (:func:`recorded_times`), else NaN (not yet measured).
     """
     runs = figure_runs(figure, budget)
     states = [_state(Path(root) / r.name, r.unit) for r in runs]
     by_method: dict[tuple[str, str], list[float]] = {}
     for r, (_, _, times, _) in zip(runs, states, strict=True):
         by_method.setdefault((r.algo, r.env), []).extend(times)
+    if not all(by_method.values()):  # a method with no run here: its recorded runs' times
+        for key, times in recorded_times(figure, get_budget(budget).name).items():
+            if key in by_method and not by_method[key]:
+                by_method[key] = times
     rows = []
     for r, (state, progress, times, note) in zip(runs, states, strict=True):
         if state == "missing" and recorded is not None and recorded(r):
@@ -174,6 +180,25 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
         per = statistics.median(pool) if pool and r.unit == "step" else math.nan
         rows.append(PlanRow(r, state, progress, per, note))
     return rows
+
+
+def recorded_times(figure: str, budget: str) -> dict[tuple[str, str], list[float]]:
+    """(algo, env) → the ``iteration_seconds`` of ``figure``'s recorded runs, from the set at
+    ``budget`` where it has the method, else from the largest budget that has it (an
+    iteration's cost depends on counts such as the number of experts, so this is a guess
+    until a run of the budget is timed)."""
+    from vslbook.experiments.record import read_set, recorded_dir
+
+    out: dict[tuple[str, str], list[float]] = {}
+    for name in dict.fromkeys((budget, "full", "reduced", "smoke")):
+        runs, evals, _ = read_set(recorded_dir(figure, name))
+        times = evals[evals["metric"] == "iteration_seconds"].dropna(subset=["value"])
+        found: dict[tuple[str, str], list[float]] = {}
+        for row in runs.itertuples():
+            found.setdefault((row.algo, row.env), []).extend(
+                times.loc[times["run"] == row.run, "value"].tolist())
+        out |= {key: values for key, values in found.items() if values and key not in out}
+    return out
 
 
 def plan_text(rows: list[PlanRow]) -> str:

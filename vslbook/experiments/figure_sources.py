@@ -1,0 +1,250 @@
+"""Where a figure's runs come from: trained in ``runs/``, recorded in ``data/results/``, or
+trained now.
+
+The book's long run sets take hours to days of CPU, so by default a figure draws the runs
+already made (:func:`figure_set`):
+
+``best`` (the default when ``$VSLBOOK_BUDGET`` is not set)
+    the largest budget (full, then reduced, then smoke) at which the figure has recorded
+    runs (:mod:`vslbook.experiments.record`) or every run finished in ``runs/``; the
+    finished runs of ``runs/`` and the recorded ones together, a run in ``runs/`` winning.
+    Where the figure has neither at any budget, its runs are trained now at ``smoke``,
+    and the figure says it shows the code path only.
+``budget`` (the default when ``$VSLBOOK_BUDGET`` names a budget)
+    the same at that budget alone; where nothing is recorded or finished there, its runs
+    are trained now at that budget.
+``retrain`` (``$VSLBOOK_RETRAIN=1``, ``make book RETRAIN=1``)
+    every run of the budget is trained now (finished ones in ``runs/`` made by today's code
+    are reused, as :func:`vslbook.training.run` always does); nothing recorded is read.
+
+``$VSLBOOK_SOURCE`` names a mode explicitly. A run of ``runs/`` counts as finished when it
+is ``DONE``, its metrics match what ``DONE`` recorded and today's code made it (or replayed
+it). A recorded run whose code has changed since is still drawn, with a warning: ``vslbook
+results --verify`` replays it. :class:`FigureSet` says where every run came from
+(:meth:`FigureSet.caption`), and :meth:`FigureSet.verdict` replaces a comparison with the
+thesis by "smoke: code path only" where the runs are smoke runs.
+"""
+
+from __future__ import annotations
+
+import os
+import warnings
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from vslbook.budget import BUDGETS, ENV_VAR, Budget, get_budget
+from vslbook.experiments.run_plan import FigureRun, figure_runs
+from vslbook.results import RunDir, RunDirError
+
+__all__ = ["MODES", "RETRAIN_ENV", "SMOKE_VERDICT", "SOURCE_ENV", "FigureSet", "figure_set",
+           "source_mode"]  # fmt: skip
+
+SOURCE_ENV = "VSLBOOK_SOURCE"
+RETRAIN_ENV = "VSLBOOK_RETRAIN"
+MODES = ("best", "budget", "retrain")
+#: what a figure says instead of a verdict when its runs are smoke runs
+SMOKE_VERDICT = "smoke: code path only (1-2 iterations; no comparison with the thesis)"
+_LARGEST_FIRST = ("full", "reduced", "smoke")
+
+
+def source_mode() -> str:
+    """The mode of :func:`figure_set` from the environment (see the module's docstring).
+
+    Raises:
+        ValueError: ``$VSLBOOK_SOURCE`` is not one of :data:`MODES`.
+    """
+    named = os.environ.get(SOURCE_ENV, "").strip().lower()
+    if named:
+        if named not in MODES:
+            raise ValueError(f"${SOURCE_ENV}={named!r}; expected one of {', '.join(MODES)}")
+        return named
+    if os.environ.get(RETRAIN_ENV, "").strip().lower() in ("1", "true", "yes"):
+        return "retrain"
+    return "budget" if os.environ.get(ENV_VAR, "").strip() else "best"
+
+
+@dataclass
+class FigureSet:
+    """A figure's runs and where they came from.
+
+    Attributes:
+        figure: the figure's id, e.g. ``fig4-3c``.
+        budget: the budget the runs were made at.
+        runs: method → run directories in seed order (recorded runs as run directories,
+            :func:`vslbook.experiments.recorded_runs.materialise`).
+        trained: names of the runs that come from ``runs/`` (trained now or before).
+        recorded: name → ``{"date", "git_sha", "stale"}`` of the runs read from
+            ``data/results/``.
+        seeds_full: method → the seeds the figure has at the ``full`` budget.
+        not_drawn: recorded runs that today's declaration of the figure no longer names
+            (their configuration changed since they were recorded).
+    """
+
+    figure: str
+    budget: str
+    runs: dict[str, list[Path]]
+    trained: list[str] = field(default_factory=list)
+    recorded: dict[str, dict[str, Any]] = field(default_factory=dict)
+    seeds_full: dict[str, int] = field(default_factory=dict)
+    not_drawn: list[str] = field(default_factory=list)
+
+    @property
+    def smoke(self) -> bool:
+        """True where the runs are smoke runs: they test the code path, not the thesis."""
+        return self.budget == "smoke"
+
+    @property
+    def stale(self) -> list[str]:
+        """Recorded runs made by code that has changed since (and not replayed by it)."""
+        return sorted(n for n, info in self.recorded.items() if info["stale"])
+
+    def verdict(self, text: str) -> str:
+        """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke."""
+        return SMOKE_VERDICT if self.smoke else text
+
+    def caption(self) -> str:
+        """One line: budget, origin (recorded: code version and date; trained), seeds per
+        method against the full budget's, and the warnings (stale, not drawn, smoke)."""
+        if self.recorded and self.trained:
+            origin = "recorded and trained"
+        elif self.recorded:
+            origin = "recorded"
+        else:
+            origin = "trained"
+        if self.recorded:
+            shas = sorted({str(i["git_sha"] or "?")[:7] for i in self.recorded.values()})
+            dates = sorted({str(i["date"] or "?")[:10] for i in self.recorded.values()})
+            span = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
+            origin += f" (data/results/{self.figure}/{self.budget}: code {', '.join(shas)}, {span})"
+        seeds = ", ".join(f"{m} {len(p)} of {self.seeds_full.get(m, '?')}"
+                          for m, p in self.runs.items())  # fmt: skip
+        line = (f"Runs of {self.figure}: {origin} at the {self.budget} budget; seeds {seeds} "
+                "(of the full budget's)")  # fmt: skip
+        notes = []
+        if self.stale:
+            notes.append(f"{len(self.stale)} recorded by code that changed since "
+                         "(vslbook results --verify replays them)")  # fmt: skip
+        if self.not_drawn:
+            notes.append(f"{len(self.not_drawn)} recorded runs not drawn (configuration changed)")
+        if self.smoke:
+            notes.append("smoke: code path only")
+        return line + ("; " + "; ".join(notes) if notes else "") + "."
+
+
+def _finished(path: Path) -> bool:
+    """A run of ``runs/`` that can be drawn: DONE, metrics as DONE recorded, today's code."""
+    rd = RunDir(path)
+    if not (path / RunDir.CONFIG).is_file() or not rd.done:
+        return False
+    try:
+        rd.check_done()
+    except RunDirError:
+        return False
+    return rd.code_matches
+
+
+def _declared(figure: str, budget: Budget, methods: tuple[str, ...] | None,
+              envs: tuple[str, ...] | None) -> list[FigureRun]:  # fmt: skip
+    runs = figure_runs(figure, budget)
+    for what, wanted, have in (("method", methods, [r.method for r in runs]),
+                               ("env", envs, [r.env for r in runs])):  # fmt: skip
+        unknown = sorted(set(wanted or ()) - set(have))
+        if unknown:
+            raise ValueError(f"figure {figure} has no {what}(s) {unknown}; expected some of "
+                             f"{list(dict.fromkeys(have))}")  # fmt: skip
+    return [r for r in runs if (methods is None or r.method in methods)
+            and (envs is None or r.env in envs)]  # fmt: skip
+
+
+def _recorded_info(path: Path) -> dict[str, Any]:
+    from vslbook.experiments.record import entry_stale
+
+    env = RunDir(path).env
+    return {"date": (env.get("recorded") or {}).get("date"), "git_sha": env.get("git_sha"),
+            "stale": entry_stale(env)}  # fmt: skip
+
+
+def _assemble(figure: str, b: Budget, declared: list[FigureRun], root: Path,
+              finished: set[str], recorded: dict[str, Path]) -> FigureSet:  # fmt: skip
+    out = FigureSet(figure, b.name, {})
+    for r in declared:
+        if r.name in finished:
+            out.runs.setdefault(r.method, []).append(root / r.name)
+            out.trained.append(r.name)
+        elif r.name in recorded:
+            out.runs.setdefault(r.method, []).append(recorded[r.name])
+            out.recorded[r.name] = _recorded_info(recorded[r.name])
+    out.not_drawn = sorted(set(recorded) - {r.name for r in figure_runs(figure, b)})
+    return out
+
+
+def _train(figure: str, b: Budget, declared: list[FigureRun], root: Path,
+           progress: bool) -> FigureSet:  # fmt: skip
+    from vslbook.progress import run_set_progress
+
+    out = FigureSet(figure, b.name, {})
+    with run_set_progress(f"{figure} runs"):  # one line per set on the book's pages
+        for r in declared:
+            out.runs.setdefault(r.method, []).append(r.train(root, progress=progress))
+            out.trained.append(r.name)
+    return out
+
+
+def figure_set(
+    figure: str,
+    budget: Budget | str | None = None,
+    root: str | Path = "runs",
+    *,
+    methods: tuple[str, ...] | None = None,
+    envs: tuple[str, ...] | None = None,
+    mode: str | None = None,
+    progress: bool = False,
+) -> FigureSet:
+    """The runs ``figure`` draws, from where the mode says (see the module's docstring).
+
+    Args:
+        budget: the budget of modes ``budget`` and ``retrain`` (default: ``$VSLBOOK_BUDGET``
+            or ``reduced``); mode ``best`` ignores it.
+        methods, envs: only these of the figure's methods / env ids.
+        mode: ``best``, ``budget`` or ``retrain``; default :func:`source_mode`.
+
+    Raises:
+        ValueError: an unknown figure, method, env or mode.
+        RuntimeError: a run trained now diverged.
+        vslbook.data.DataIntegrityError: a recorded table fails its registry.
+    """
+    from vslbook.experiments.recorded_runs import materialise
+
+    mode = source_mode() if mode is None else mode
+    if mode not in MODES:
+        raise ValueError(f"mode {mode!r}; expected one of {', '.join(MODES)}")
+    root = Path(root)
+    named = get_budget(budget)
+    full = _declared(figure, BUDGETS["full"], methods, envs)
+    seeds_full: dict[str, int] = {}
+    for r in full:
+        seeds_full[r.method] = seeds_full.get(r.method, 0) + 1
+    if mode == "retrain":
+        out = _train(figure, named, _declared(figure, named, methods, envs), root, progress)
+    else:
+        out = None
+        for name in ([named.name] if mode == "budget" else _LARGEST_FIRST):
+            b = BUDGETS[name]
+            declared = _declared(figure, b, methods, envs)
+            finished = {r.name for r in declared if _finished(root / r.name)}
+            recorded = materialise(figure, b)
+            if recorded or len(finished) == len(declared):
+                out = _assemble(figure, b, declared, root, finished, recorded)
+                if out.runs:
+                    break
+                out = None
+        if out is None:
+            b = named if mode == "budget" else BUDGETS["smoke"]
+            out = _train(figure, b, _declared(figure, b, methods, envs), root, progress)
+    out.seeds_full = seeds_full
+    if out.stale:
+        warnings.warn(f"{out.figure}: {len(out.stale)} recorded run(s) were made by code that "
+                      f"has changed since ({', '.join(out.stale[:3])}...); `vslbook results "
+                      "--verify` replays them with today's code", stacklevel=2)  # fmt: skip
+    return out
