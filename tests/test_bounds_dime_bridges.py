@@ -17,7 +17,7 @@ from scipy.stats import multivariate_normal
 
 from vslbook.bounds import CheckReport
 from vslbook.bounds import dime as D
-from vslbook.bounds import dime_bridges_checks as C
+from vslbook.bounds import dime_bridges_quadrature as BQ
 from vslbook.srl.diffusion_policy import (
     DiffusionPolicy,
     DiffusionPolicyConfig,
@@ -298,7 +298,7 @@ def test_transfer_quadrature_against_brute_force_grid(seed):
     """The check's quadrature (marginals propagated step by step) against the full 3-D grid,
     for the nonlinear bridge and the double-well target, at N = 2."""
     report = D.check_bridge_quadrature(seed, n_steps=2, n_samples=200)
-    grid = _grid_quantities(C._nonlinear_bridge(seed, 2, 1.0), C._double_well(seed))
+    grid = _grid_quantities(BQ._nonlinear_bridge(seed, 2, 1.0), BQ._double_well(seed))
     assert abs(grid["mass"] - 1) < 1e-9
     for key in ("bound", "kl", "entropy"):
         assert abs(float(report.data[key]) - grid[key]) < 1e-10, key

@@ -16,9 +16,10 @@ from scipy.optimize import approx_fprime, minimize
 from vslbook.bounds import CheckReport
 from vslbook.bounds import dime as D
 from vslbook.bounds import dime_entropy as E
+from vslbook.bounds import dime_lq as LQ
 from vslbook.bounds import dime_policy_iteration as PI
 from vslbook.bounds import dime_tabular as T
-from vslbook.bounds._helpers import _np
+from vslbook.bounds.toy_numerics import to_numpy
 
 # check names used below
 FIXED_POINT = "T Q^pi = Q^pi: the closed form of Eq. 5.17 (with ℓ) is the backup's fixed point"
@@ -129,22 +130,22 @@ def test_no_improvement_is_monotone_but_not_optimal():
 
 def _family_and_target():
     policy = E.linear_gaussian_policy(4, 1.5, 1.0, [1.0], [0.0], [0.0])
-    family = PI._ChainFamily(_np(policy.step_sizes)[:, 0].astype(float), 1.5)
+    family = LQ.ChainFamily(to_numpy(policy.step_sizes)[:, 0].astype(float), 1.5)
     # Q(s, a) = -s^2 / 2 + 3 s a - a^2 + 2 a: with alpha = 0.5 the target is N(1 + 1.5 s, 1/4)
     q = np.array([-0.5, 3.0, -1.0, 0.0, 2.0, 0.0])
-    return family, PI._Target.of(q, 0.5, family.eta, family.sigma0)
+    return family, LQ.Target.of(q, 0.5, family.eta, family.sigma0)
 
 
 def test_exact_improvement_minimises_the_kl_at_every_state():
     family, target = _family_and_target()
     states = np.linspace(-2.0, 2.0, 9)
     theta0 = np.r_[0.1, np.zeros(8)]
-    theta = PI._improve_exact(family, target, states, theta0)
-    at_theta = PI._joint_kls(family, theta, target, states)
+    theta = LQ.improve_exact(family, target, states, theta0)
+    at_theta = LQ.joint_kls(family, theta, target, states)
     for i in (0, 8):  # each state alone, over (slope, offsets at that state), by BFGS
 
         def kl_alone(x, s=states[i]):
-            return PI._joint_kls(family, np.r_[x, np.zeros(4)], target, np.array([s]))[0]
+            return LQ.joint_kls(family, np.r_[x, np.zeros(4)], target, np.array([s]))[0]
 
         best = minimize(kl_alone, np.r_[theta0[:5]], method="BFGS", options={"gtol": 1e-10})
         assert at_theta[i] == pytest.approx(best.fun, rel=1e-8, abs=1e-10)
@@ -159,7 +160,7 @@ def test_shared_offsets_cannot_minimise_every_state_at_once():
 
         def kl_shared(x, s=s):
             theta = np.r_[x[0], np.full(4, x[1]), np.zeros(4)]
-            return PI._joint_kls(family, theta, target, np.array([s]))[0]
+            return LQ.joint_kls(family, theta, target, np.array([s]))[0]
 
         slopes.append(minimize(kl_shared, [0.0, 0.0], method="BFGS").x[0])
     assert abs(slopes[0] - slopes[1]) > 0.1  # -1.14 and -0.71; per-step offsets: both -1.208

@@ -16,8 +16,9 @@ The checks live in one module per section of the thesis; this module re-exports 
   is linear-Gaussian and every quantity has a closed form (:func:`linear_gaussian_chain`).
 * Section 5.4.2, the Bellman operator of Eq. 5.21 (Proposition 5.4.1), policy improvement
   (Proposition 5.4.2, Eqs. 5.22-5.23, proof Eqs. C.15-C.28) and policy iteration
-  (Proposition 5.4.3), twice: :mod:`vslbook.bounds.dime_tabular` on random tabular MDPs with
-  the exact entropy of a discrete policy (SAC's soft policy iteration, no diffusion chain), and
+  (Proposition 5.4.3), twice: :mod:`vslbook.bounds.dime_tabular` (the operator) and
+  :mod:`vslbook.bounds.dime_tabular_iteration` (improvement, iteration) on random tabular MDPs
+  with the exact entropy of a discrete policy (SAC's soft policy iteration, no diffusion chain), and
   :mod:`vslbook.bounds.dime_policy_iteration` with the diffusion policies of Section 5.4.1 and
   the bound ``ℓ`` on a linear-quadratic problem (:func:`check_diffusion_policy_iteration`).
 * :mod:`vslbook.bounds.dime_score_matching`, Section 5.3.2: the denoising score-matching loss of
@@ -26,11 +27,12 @@ The checks live in one module per section of the thesis; this module re-exports 
 * Section 5.6, general bridges (Eqs. 5.29-5.38): the bridge, its samplers and estimators in
   :mod:`vslbook.bounds.dime_bridges`, closed forms for affine drifts in
   :mod:`vslbook.bounds.dime_bridges_linear`, and the checks in
-  :mod:`vslbook.bounds.dime_bridges_checks`: against closed forms
-  (:func:`check_general_bridge`) and against quadrature with nonlinear drifts
-  (:func:`check_bridge_quadrature`); and in :mod:`vslbook.bounds.dime_bridges_special`,
-  DIME (thesis notation and the library's ``DiffusionPolicy``, with and without
-  ``general_bridges``) as the special case (:func:`check_dime_as_bridge`).
+  :mod:`vslbook.bounds.dime_bridges_checks` against closed forms
+  (:func:`check_general_bridge`) and :mod:`vslbook.bounds.dime_bridges_quadrature` against
+  quadrature with nonlinear drifts (:func:`check_bridge_quadrature`); and in
+  :mod:`vslbook.bounds.dime_bridges_special`, DIME (thesis notation and the library's
+  ``DiffusionPolicy``, with and without ``general_bridges``) as the special case
+  (:func:`check_dime_as_bridge`).
 
 Every check runs in about a second or less on one CPU thread.
 """
@@ -50,13 +52,14 @@ from vslbook.bounds.dime_bridges import (
     sample_backward,
     sample_forward,
 )
-from vslbook.bounds.dime_bridges_checks import check_bridge_quadrature, check_general_bridge
+from vslbook.bounds.dime_bridges_checks import check_general_bridge
 from vslbook.bounds.dime_bridges_linear import (
     LinearBridge,
     affine_map,
     linear_bridge_closed_form,
     linear_sde_moments,
 )
+from vslbook.bounds.dime_bridges_quadrature import check_bridge_quadrature
 from vslbook.bounds.dime_bridges_special import check_dime_as_bridge
 from vslbook.bounds.dime_entropy import (
     AffineScore,
@@ -75,11 +78,10 @@ from vslbook.bounds.dime_score_matching import (
 )
 from vslbook.bounds.dime_tabular import (
     check_soft_bellman_contraction,
-    check_soft_policy_iteration,
-    mirror_step,
     policy_entropy,
     soft_bellman_operator,
 )
+from vslbook.bounds.dime_tabular_iteration import check_soft_policy_iteration, mirror_step
 
 __all__ = [
     "AffineScore",

@@ -19,7 +19,8 @@ bridge's kernels) and of Eq. 5.37, with the two special cases:
 
 Closed forms for bridges whose drifts are affine are in
 :mod:`vslbook.bounds.dime_bridges_linear`, and the checks in
-:mod:`vslbook.bounds.dime_bridges_checks` and :mod:`vslbook.bounds.dime_bridges_special`.
+:mod:`vslbook.bounds.dime_bridges_checks`, :mod:`vslbook.bounds.dime_bridges_quadrature` and
+:mod:`vslbook.bounds.dime_bridges_special`.
 
 Conventions (the thesis is silent on them):
 
@@ -44,11 +45,13 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from vslbook.bounds._helpers import _count, _positive, _rng
+from vslbook.bounds.toy_numerics import check_count, check_positive, seeded_rng
 
 __all__ = [
+    "BoundEstimator",
     "Drift",
     "GeneralBridge",
+    "KLEstimator",
     "bridge_kl_samples",
     "dime_bridge",
     "entropy_bound_samples",
@@ -133,7 +136,7 @@ def make_bridge(
     ``(N,)`` (a schedule), ``(1, d)`` (one constant per dimension) or ``(N, d)``;
     ``prior_var`` and ``prior_mean`` are scalars or ``(d,)``.
     """
-    n_steps, dim = _count("n_steps", n_steps), _count("dim", dim)
+    n_steps, dim = check_count("n_steps", n_steps), check_count("dim", dim)
     beta_arr = np.asarray(beta, dtype=float)
     if beta_arr.ndim == 1:
         beta_arr = beta_arr[:, None]
@@ -151,7 +154,7 @@ def make_bridge(
         raise ValueError(f"prior_var must be positive, got {prior_var}")
     mean = np.broadcast_to(np.asarray(prior_mean, dtype=float), (dim,)).copy()
     return GeneralBridge(
-        f or _zero, u or _zero, v or _zero, beta_arr, _positive("delta", delta), prior, mean
+        f or _zero, u or _zero, v or _zero, beta_arr, check_positive("delta", delta), prior, mean
     )
 
 
@@ -175,7 +178,7 @@ def dime_bridge(
     (for ``eta = 1`` the thesis's ``f = -beta a``, ``u = 0``, ``v = 2 grad log pi~_n`` and
     ``N(0, I)`` of Eq. 5.30 exactly). ``beta`` is the constant of Eqs. 5.31-5.36.
     """
-    beta, eta = _positive("beta", beta), _positive("eta", eta)
+    beta, eta = check_positive("beta", beta), check_positive("eta", eta)
 
     def f(a: np.ndarray, n: int) -> np.ndarray:
         return -beta * a
@@ -231,6 +234,16 @@ def policy_bridge(policy: torch.nn.Module, obs: np.ndarray) -> GeneralBridge:
     return make_bridge(None, u, v, beta, 1.0, n_steps, etas.shape[1], config.sigma0**2)
 
 
+#: An estimator of the bridge KL of Eq. 5.37 per backward trajectory:
+#: ``(bridge, traj, Q, log Z) -> samples`` (default :func:`bridge_kl_samples`).
+KLEstimator = Callable[
+    [GeneralBridge, np.ndarray, Callable[[np.ndarray], np.ndarray], float], np.ndarray
+]
+#: An estimator of the entropy bound ``ℓ`` per backward trajectory: ``(bridge, traj) ->
+#: samples`` (default :func:`entropy_bound_samples`).
+BoundEstimator = Callable[[GeneralBridge, np.ndarray], np.ndarray]
+
+
 def _log_normal(x: np.ndarray, mean: np.ndarray, var: np.ndarray) -> np.ndarray:
     """``log N(x; mean, diag(var))`` summed over the last axis."""
     return -0.5 * ((x - mean) ** 2 / var + np.log(2 * math.pi * var)).sum(-1)
@@ -251,8 +264,8 @@ def sample_backward(bridge: GeneralBridge, n_samples: int, seed: int = 0) -> np.
 
     Returns ``(N + 1, n_samples, d)`` with ``traj[n] = a^n`` (``traj[0]`` the action).
     """
-    rng = _rng(seed, 29)
-    n, d = _count("n_samples", n_samples), bridge.dim
+    rng = seeded_rng(seed, 29)
+    n, d = check_count("n_samples", n_samples), bridge.dim
     traj = np.empty((bridge.n_steps + 1, n, d))
     traj[-1] = bridge.prior_mean + np.sqrt(bridge.prior_var) * rng.standard_normal((n, d))
     for step in range(bridge.n_steps, 0, -1):
@@ -269,7 +282,7 @@ def sample_forward(bridge: GeneralBridge, a0: np.ndarray, seed: int = 0) -> np.n
     a0 = np.asarray(a0, dtype=float)
     if a0.ndim != 2 or a0.shape[1] != bridge.dim:
         raise ValueError(f"a0 must have shape (batch, {bridge.dim}), got {a0.shape}")
-    rng = _rng(seed, 31)
+    rng = seeded_rng(seed, 31)
     traj = np.empty((bridge.n_steps + 1, *a0.shape))
     traj[0] = a0
     for step in range(bridge.n_steps):

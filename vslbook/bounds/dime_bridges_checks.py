@@ -5,9 +5,10 @@
   (:mod:`vslbook.bounds.dime_bridges_linear`): Monte Carlo of the samplers and estimators
   against it, the bound and its gap, the inference form, Euler-Maruyama against the SDEs, and
   the controls that make the chains each other's time reversal.
-* :func:`check_bridge_quadrature`: a one-dimensional bridge with nonlinear drifts and a
-  double-well target, where no closed form exists; the same quantities by brute-force
-  quadrature on a grid (the chain's kernels applied as matrices) against Monte Carlo.
+* :func:`check_bridge_quadrature`, re-exported here: a one-dimensional bridge with nonlinear
+  drifts and a double-well target, where no closed form exists; the same quantities by
+  brute-force quadrature on a grid against Monte Carlo. It lives in
+  :mod:`vslbook.bounds.dime_bridges_quadrature`.
 * DIME as the special case is checked in :mod:`vslbook.bounds.dime_bridges_special`.
 
 Import from :mod:`vslbook.bounds.dime`, which re-exports everything public here.
@@ -15,15 +16,15 @@ Import from :mod:`vslbook.bounds.dime`, which re-exports everything public here.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _count, _rng, _worst
 from vslbook.bounds.dime_bridges import (
+    BoundEstimator,
     GeneralBridge,
+    KLEstimator,
     bridge_kl_samples,
     entropy_bound_samples,
     make_bridge,
@@ -31,17 +32,10 @@ from vslbook.bounds.dime_bridges import (
     sample_forward,
 )
 from vslbook.bounds.dime_bridges_linear import linear_bridge_closed_form, linear_sde_moments
+from vslbook.bounds.dime_bridges_quadrature import check_bridge_quadrature
+from vslbook.bounds.toy_numerics import check_count, mc_mean_stderr, seeded_rng, worst_check
 
 __all__ = ["check_bridge_quadrature", "check_general_bridge"]
-
-KLEstimator = Callable[
-    [GeneralBridge, np.ndarray, Callable[[np.ndarray], np.ndarray], float], np.ndarray
-]
-BoundEstimator = Callable[[GeneralBridge, np.ndarray], np.ndarray]
-
-
-def _mc(x: np.ndarray) -> tuple[float, float]:
-    return float(x.mean()), float(x.std(ddof=1) / math.sqrt(x.size))
 
 
 def _quadratic_q(mu: np.ndarray, cov: np.ndarray) -> Callable[[np.ndarray], np.ndarray]:
@@ -52,7 +46,7 @@ def _quadratic_q(mu: np.ndarray, cov: np.ndarray) -> Callable[[np.ndarray], np.n
 def _affine_family(seed: int, dim: int) -> dict[str, np.ndarray]:
     """Seeded coefficients of ``f(a) = F a``, ``u = (U0 + t U1) a + u0`` and
     ``v = (V0 + t V1) a + v0``, the target ``N(mu, sigma)`` and ``beta``."""
-    rng = _rng(seed, 37)
+    rng = seeded_rng(seed, 37)
     skew = rng.normal(scale=0.3, size=(dim, dim))
     return {
         "F": -0.5 * np.eye(dim) + skew - skew.T,
@@ -123,7 +117,7 @@ def _sde_errors(c: dict[str, np.ndarray], steps: Sequence[int], horizon: float) 
 def _reversal_kls(seed: int, steps: Sequence[int], horizon: float) -> np.ndarray:
     """``(len(steps), 2)``: Eq. 5.37 when ``v = 2 grad log ->pi_n - u`` (Nelson's relation),
     for a general forward control and for DIME's ``f = -beta a``, ``u = 0``, in 1-D."""
-    rng = _rng(seed, 41)
+    rng = seeded_rng(seed, 41)
     mu, var = rng.normal(scale=0.5), rng.uniform(0.2, 0.5)
     slope, offset = rng.uniform(0.2, 0.6), rng.normal(scale=0.3)
     cases = (
@@ -192,49 +186,49 @@ def check_general_bridge(
         ``sde_steps``, ``sde_errors`` (steps x [forward, backward]), ``reversal_steps`` and
         ``reversal_kl`` (steps x [general u, DIME]).
     """
-    n_samples = _count("n_samples", n_samples, 10)
+    n_samples = check_count("n_samples", n_samples, 10)
     kl_est = kl_estimator or bridge_kl_samples
     bound_est = bound_estimator or entropy_bound_samples
     c = _affine_family(seed, 2)
-    bridge = _affine_bridge(c, _count("n_steps", n_steps), horizon)
+    bridge = _affine_bridge(c, check_count("n_steps", n_steps), horizon)
     cf = linear_bridge_closed_form(bridge, c["mu"], c["sigma"])
     q = _quadratic_q(c["mu"], c["sigma"])
 
     traj = sample_backward(bridge, n_samples, seed)
     kl_samples = kl_est(bridge, traj, q, cf.log_z)
-    kl_mc, kl_se = _mc(kl_samples)
-    bound_mc, bound_se = _mc(bound_est(bridge, traj))
+    kl_mc, kl_se = mc_mean_stderr(kl_samples)
+    bound_mc, bound_se = mc_mean_stderr(bound_est(bridge, traj))
     a0 = traj[0]
     cov_se = np.sqrt(
         (np.diag(cf.marginal_cov)[:, None] * np.diag(cf.marginal_cov)[None, :] + cf.marginal_cov**2)
         / n_samples
     )
-    rng = _rng(seed, 43)
+    rng = seeded_rng(seed, 43)
     start = c["mu"] + rng.standard_normal((n_samples, 2)) @ np.linalg.cholesky(c["sigma"]).T
     a_n = sample_forward(bridge, start, seed)[-1]
     end_mean, end_cov = cf.forward_marginals[0][-1], cf.forward_marginals[1][-1]
 
-    steps = [_count("sde_steps entry", n) for n in sde_steps]
+    steps = [check_count("sde_steps entry", n) for n in sde_steps]
     sde_err = _sde_errors(c, steps, horizon)
-    rev_steps = [_count("reversal_steps entry", n) for n in reversal_steps]
+    rev_steps = [check_count("reversal_steps entry", n) for n in reversal_steps]
     rev_kl = _reversal_kls(seed, rev_steps, horizon)
     tol = relative_tol(cf.kl, cf.bound, cf.entropy, cf.expected_q, cf.log_z)
     checks = (
-        _worst(
+        worst_check(
             "sample mean of a^0 on backward chains = closed form (5 SE)",
             "Eqs. 5.32, 5.34",
             a0.mean(0),
             cf.marginal_mean,
             5 * np.sqrt(np.diag(cf.marginal_cov) / n_samples),
         ),
-        _worst(
+        worst_check(
             "sample covariance of a^0 on backward chains = closed form (5 SE)",
             "Eqs. 5.32, 5.34",
             np.cov(a0.T),
             cf.marginal_cov,
             5 * cov_se,
         ),
-        _worst(
+        worst_check(
             "sample mean of a^N on forward chains from the target = closed form (5 SE)",
             "Eqs. 5.31, 5.33",
             a_n.mean(0),
@@ -285,7 +279,7 @@ def check_general_bridge(
             tol,
             "<=",
         ),
-        _worst(
+        worst_check(
             f"Euler-Maruyama vs the SDEs: the error falls with delta (N = {steps})",
             "Eqs. 5.29-5.32",
             np.diff(sde_err, axis=0),
@@ -293,14 +287,14 @@ def check_general_bridge(
             0.0,
             "<=",
         ),
-        _worst(
+        worst_check(
             f"... and halves when delta halves (first order; N = {steps[-2]} -> {steps[-1]})",
             "Eqs. 5.29-5.32",
             sde_err[-1] / sde_err[-2],
             0.5,
             0.05,
         ),
-        _worst(
+        worst_check(
             f"v = 2 grad log ->pi_n - u: Eq. 5.37 falls with delta (N = {rev_steps})",
             "Eqs. 5.29-5.30, 5.37",
             np.diff(rev_kl, axis=0),
@@ -308,7 +302,7 @@ def check_general_bridge(
             0.0,
             "<=",
         ),
-        _worst(
+        worst_check(
             f"... and halves when delta halves (N = {rev_steps[-2]} -> {rev_steps[-1]})",
             "Eqs. 5.29-5.30, 5.37",
             rev_kl[-1] / rev_kl[-2],
@@ -338,180 +332,3 @@ def check_general_bridge(
         "reversal_kl": rev_kl,
     }
     return CheckReport("General bridges, affine drifts (Section 5.6)", checks, data)
-
-
-def _nonlinear_bridge(seed: int, n_steps: int, horizon: float) -> GeneralBridge:
-    rng = _rng(seed, 47)
-    a1, a2, a3 = rng.uniform(0.5, 1.0, 3)
-
-    def f(a: np.ndarray, n: int) -> np.ndarray:
-        return -0.5 * a + 0.3 * np.sin(2 * a)
-
-    def u(a: np.ndarray, n: int) -> np.ndarray:
-        return a1 * np.tanh(a) - 0.4 * n / n_steps
-
-    def v(a: np.ndarray, n: int) -> np.ndarray:
-        return -3.0 * a + 2 * a2 * np.tanh(2 * a) + 0.3 * a3 * np.cos(a)
-
-    return make_bridge(f, u, v, 1.0, horizon / n_steps, n_steps, 1)
-
-
-def _double_well(seed: int) -> Callable[[np.ndarray], np.ndarray]:
-    tilt = _rng(seed, 53).uniform(-0.4, 0.4)
-    return lambda a: -1.5 * (np.asarray(a)[..., 0] ** 2 - 1) ** 2 + tilt * np.asarray(a)[..., 0]
-
-
-def _log_gauss(x: np.ndarray, mean: np.ndarray, var: float) -> np.ndarray:
-    return -0.5 * ((x - mean) ** 2 / var + math.log(2 * math.pi * var))
-
-
-def _quadrature(
-    bridge: GeneralBridge, q: Callable[[np.ndarray], np.ndarray], grid: np.ndarray
-) -> dict[str, float | np.ndarray]:
-    """Brute-force quadrature of a 1-D bridge: the backward chain's marginals are propagated
-    on ``grid`` with its kernels as matrices; every expectation is a sum over the grid."""
-    h = grid[1] - grid[0]
-    col = grid[:, None]
-    log_p = _log_gauss(grid, bridge.prior_mean[0], bridge.prior_var[0])
-    p = np.exp(log_p)
-    log_prior = float(np.sum(p * log_p) * h)  # E[log pi~_N]
-    fwd_terms, bwd_terms = 0.0, 0.0
-    for n in range(bridge.n_steps, 0, -1):
-        var = float(bridge.kernel_var(n)[0])
-        # log pi~_{n-1|n}(y | x): rows y = a^{n-1}, columns x = a^n
-        log_bwd = _log_gauss(grid[:, None], bridge.backward_mean(col, n)[:, 0][None, :], var)
-        log_fwd = _log_gauss(grid[None, :], bridge.forward_mean(col, n - 1)[:, 0][:, None], var)
-        pair = np.exp(log_bwd) * p[None, :] * h * h  # mass of (a^{n-1}, a^n) cells
-        bwd_terms += float(np.sum(pair * log_bwd))
-        fwd_terms += float(np.sum(pair * log_fwd))
-        p = pair.sum(1) / h
-    q_grid = q(col)
-    top = float(q_grid.max())
-    log_z = top + float(np.log(np.sum(np.exp(q_grid - top)) * h))
-    log_target = q_grid - log_z
-    target = np.exp(log_target)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        plogp = np.where(p > 0, p * np.log(p), 0.0)
-    entropy = float(-np.sum(plogp) * h)
-    bound = fwd_terms - log_prior - bwd_terms
-    expected_q = float(np.sum(p * q_grid) * h)
-    mask = p > 0
-    marginal_kl = float(np.sum(p[mask] * (np.log(p[mask]) - log_target[mask])) * h)
-    return {
-        "density": p,
-        "target": target,
-        "mass": float(p.sum() * h),
-        "mean": float(np.sum(p * grid) * h),
-        "var": float(np.sum(p * grid**2) * h - np.sum(p * grid * h) ** 2),
-        "entropy": entropy,
-        "bound": bound,
-        "kl": log_prior + bwd_terms - expected_q + log_z - fwd_terms,
-        "marginal_kl": marginal_kl,
-        "log_z": log_z,
-    }
-
-
-def check_bridge_quadrature(
-    seed: int = 0,
-    n_steps: int = 4,
-    n_samples: int = 20_000,
-    horizon: float = 1.0,
-    grid_size: int = 1001,
-    kl_estimator: KLEstimator | None = None,
-    bound_estimator: BoundEstimator | None = None,
-) -> CheckReport:
-    """Eqs. 5.31-5.38 with nonlinear drifts and a double-well target, against quadrature.
-
-    A one-dimensional bridge with ``f(a) = -a/2 + 0.3 sin 2a``, ``u`` and ``v`` built from
-    ``tanh`` and ``cos`` (seeded), ``beta = 1``, ``N(0, 1)`` prior, and the target ``exp Q /
-    Z`` with ``Q(a) = -1.5 (a^2 - 1)^2 + c a`` (two modes, Eq. 5.38). No closed form exists;
-    the reference is brute force: the backward chain's marginal is propagated on a grid of
-    ``grid_size`` points by applying each Gaussian kernel of Eq. 5.36 as a matrix, and every
-    expectation in ``ℓ`` and Eq. 5.37 (the log-kernels of Eqs. 5.35-5.36 under the
-    joint of two consecutive steps) is a sum over the grid.
-
-    Checks: the grid's mass, sample mean and variance of ``a^0`` (5 SE), the Monte-Carlo means
-    of the ``ℓ`` and Eq. 5.37 estimators (5 SE) against quadrature, ``ℓ <= H(pi~_0)`` and the
-    data-processing inequality of Eq. 5.20 for the bridge.
-
-    Returns:
-        Report with data ``grid``, ``density`` (of ``a^0``, quadrature), ``target``,
-        ``actions`` (the first 5000 ``a^0``), ``entropy``, ``bound``, ``kl``, ``kl_mc``,
-        ``kl_stderr``, ``bound_mc``, ``bound_stderr``, ``marginal_kl``.
-    """
-    n_samples = _count("n_samples", n_samples, 10)
-    kl_est = kl_estimator or bridge_kl_samples
-    bound_est = bound_estimator or entropy_bound_samples
-    bridge = _nonlinear_bridge(seed, _count("n_steps", n_steps), horizon)
-    q = _double_well(seed)
-    grid = np.linspace(-10.0, 10.0, _count("grid_size", grid_size, 101))
-    quad = _quadrature(bridge, q, grid)
-    traj = sample_backward(bridge, n_samples, seed)
-    kl_mc, kl_se = _mc(kl_est(bridge, traj, q, quad["log_z"]))
-    bound_mc, bound_se = _mc(bound_est(bridge, traj))
-    a0 = traj[0, :, 0]
-    tol = relative_tol(quad["kl"], quad["bound"], quad["entropy"], rtol=1e-9)
-    checks = (
-        Check("grid quadrature keeps the probability mass", "Eq. 5.34", quad["mass"], 1.0, 1e-6),
-        Check(
-            "sample mean of a^0 = quadrature (5 SE)",
-            "Eqs. 5.32, 5.34",
-            a0.mean(),
-            quad["mean"],
-            5 * math.sqrt(quad["var"] / n_samples),
-        ),
-        Check(
-            "sample variance of a^0 = quadrature (5 SE)",
-            "Eqs. 5.32, 5.34",
-            a0.var(ddof=1),
-            quad["var"],
-            5 * quad["var"] * math.sqrt(2 / (n_samples - 1)),
-        ),
-        Check(
-            "Monte Carlo of the bound estimator = quadrature ℓ (5 SE)",
-            "Eqs. 5.15, 5.35-5.36",
-            bound_mc,
-            quad["bound"],
-            5 * bound_se,
-        ),
-        Check(
-            "Monte Carlo of Eq. 5.37 = quadrature (5 SE)",
-            "Eqs. 5.37-5.38",
-            kl_mc,
-            quad["kl"],
-            5 * kl_se,
-        ),
-        Check(
-            "ℓ <= H(pi~_0) (quadrature)",
-            "Eqs. 5.15, C.2",
-            quad["bound"],
-            quad["entropy"],
-            tol,
-            "<=",
-        ),
-        Check(
-            "KL(pi~_0 || exp Q / Z) <= Eq. 5.37 (quadrature)",
-            "Eqs. 5.20, 5.37",
-            quad["marginal_kl"],
-            quad["kl"],
-            tol,
-            "<=",
-        ),
-    )
-    data = {
-        "grid": grid,
-        "density": quad["density"],
-        "target": quad["target"],
-        "actions": a0[:5000],
-        "entropy": np.array(quad["entropy"]),
-        "bound": np.array(quad["bound"]),
-        "kl": np.array(quad["kl"]),
-        "marginal_kl": np.array(quad["marginal_kl"]),
-        "kl_mc": np.array(kl_mc),
-        "kl_stderr": np.array(kl_se),
-        "bound_mc": np.array(bound_mc),
-        "bound_stderr": np.array(bound_se),
-    }
-    return CheckReport(
-        "General bridges, nonlinear drifts, by quadrature (Section 5.6)", checks, data
-    )

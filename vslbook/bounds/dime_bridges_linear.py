@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.integrate import solve_ivp
 
-from vslbook.bounds._helpers import _np, _t
 from vslbook.bounds.dime_bridges import GeneralBridge
+from vslbook.bounds.toy_numerics import to_numpy, to_tensor
 from vslbook.dists import gaussian_kl
 
 __all__ = [
@@ -99,7 +99,11 @@ def _joint(
 
 
 def _kl(mean_p, cov_p, mean_q, cov_q) -> float:
-    return float(_np(gaussian_kl(_t(mean_p), _t(cov_p), _t(mean_q), _t(cov_q))))
+    return float(
+        to_numpy(
+            gaussian_kl(to_tensor(mean_p), to_tensor(cov_p), to_tensor(mean_q), to_tensor(cov_q))
+        )
+    )
 
 
 def _entropy(cov: np.ndarray) -> float:

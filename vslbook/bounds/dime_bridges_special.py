@@ -19,7 +19,6 @@ import torch
 from torch import nn
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _count, _rng, _worst
 from vslbook.bounds.dime_bridges import (
     GeneralBridge,
     dime_bridge,
@@ -30,6 +29,7 @@ from vslbook.bounds.dime_bridges import (
 from vslbook.bounds.dime_bridges_linear import linear_bridge_closed_form
 from vslbook.bounds.dime_entropy import single_thread
 from vslbook.bounds.dime_linear_chain import AffineScore, linear_gaussian_chain
+from vslbook.bounds.toy_numerics import check_count, seeded_rng, worst_check
 from vslbook.srl.diffusion_policy import DiffusionPolicy, DiffusionPolicyConfig, ScoreNetwork
 
 __all__ = ["check_dime_as_bridge"]
@@ -111,9 +111,9 @@ def check_dime_as_bridge(
         on) and ``closed_form`` (rows: DIME thesis notation, library GB; columns: ``ℓ``,
         ``H``, gap, each bridge then chain).
     """
-    n_samples = _count("n_samples", n_samples, 10)
+    n_samples = check_count("n_samples", n_samples, 10)
     to_bridge = bridge_of or policy_bridge
-    rng = _rng(seed, 59)
+    rng = seeded_rng(seed, 59)
     with single_thread():
         # thesis notation, nonlinear score
         beta, delta, eta, n_steps = 0.8, 0.15, 1.4, 5
@@ -209,35 +209,35 @@ def check_dime_as_bridge(
             0.0,
             1e-12,
         ),
-        _worst(
+        worst_check(
             "DIME in thesis notation: bridge closed form = DIME chain (ℓ, H, gap)",
             "Eqs. 5.15, 5.35-5.36",
             rows[0, ::2],
             rows[0, 1::2],
             relative_tol(*rows[0], rtol=1e-9),
         ),
-        _worst(
+        worst_check(
             "DiffusionPolicy entropy_bound = bridge estimator, per chain (GB off, on)",
             "Eqs. 5.15, 5.35-5.36",
             np.array(sample_gaps),
             0.0,
             np.array(sample_scale),
         ),
-        _worst(
+        worst_check(
             "DiffusionPolicy (GB) a^0 mean = bridge sampler's (5 SE)",
             "Eqs. 5.32, 5.34",
             moments[0],
             moments[1],
             5 * m_se,
         ),
-        _worst(
+        worst_check(
             "DiffusionPolicy (GB) a^0 variance = bridge sampler's (5 SE)",
             "Eqs. 5.32, 5.34",
             moments[2],
             moments[3],
             5 * v_se,
         ),
-        _worst(
+        worst_check(
             "affine GB policy: bridge closed form = linear_gaussian_chain (ℓ, H, gap)",
             "Eqs. 5.15, 5.35-5.37",
             rows[1, ::2],

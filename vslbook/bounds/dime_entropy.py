@@ -21,7 +21,6 @@ import torch
 from torch import Tensor
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _count, _np, _rng, _worst
 from vslbook.bounds.dime_linear_chain import (
     AffineScore,
     LinearGaussianChain,
@@ -31,6 +30,7 @@ from vslbook.bounds.dime_linear_chain import (
     linear_gaussian_policy,
     noising_joint,
 )
+from vslbook.bounds.toy_numerics import check_count, seeded_rng, to_numpy, worst_check
 from vslbook.srl.diffusion_policy import DiffusionPolicy, PolicySample
 
 __all__ = [
@@ -74,7 +74,7 @@ def _sample_chain(
     generator = torch.Generator().manual_seed(seed)
     with torch.no_grad():
         out = policy.sample(obs, generator=generator, return_trajectory=True)
-    return _np(bound_estimator(out)).astype(float), _np(out.trajectory)
+    return to_numpy(bound_estimator(out)).astype(float), to_numpy(out.trajectory)
 
 
 def _log_ratio_terms(
@@ -177,23 +177,23 @@ def _entropy_lower_bound(
     bound_estimator: Callable[[PolicySample], Tensor] | None,
 ) -> CheckReport:
     """The body of :func:`check_entropy_lower_bound`."""
-    d = _count("act_dim", act_dim)
-    n_samples = _count("n_samples", n_samples, 2)
-    n_series_samples = _count("n_series_samples", n_series_samples, 2)
-    series = [_count("n_steps_series entry", n) for n in n_steps_series]
+    d = check_count("act_dim", act_dim)
+    n_samples = check_count("n_samples", n_samples, 2)
+    n_series_samples = check_count("n_series_samples", n_series_samples, 2)
+    series = [check_count("n_steps_series entry", n) for n in n_steps_series]
     entropy_of = marginal_entropy or (lambda mean, var: gaussian_entropy(var))
     estimator = bound_estimator or (lambda sample: sample.entropy_bound)
-    rng = _rng(seed)
+    rng = seeded_rng(seed)
     noise_var = rng.uniform(0.5, 1.5, d)
     slope, offset = rng.uniform(-0.5, 0.0, d), rng.normal(scale=1.0, size=d)
     target_mean, target_std = rng.normal(size=d), rng.uniform(0.5, 1.5, d)
 
     def setup(n: int) -> tuple[DiffusionPolicy, np.ndarray, LinearGaussianChain]:
         policy = linear_gaussian_policy(n, sigma0, total_time, noise_var, slope, offset, seed)
-        etas = _np(policy.step_sizes)
+        etas = to_numpy(policy.step_sizes)
         return policy, etas, linear_gaussian_chain(etas, sigma0, slope, offset)
 
-    policy, etas, chain = setup(_count("n_steps", n_steps))
+    policy, etas, chain = setup(check_count("n_steps", n_steps))
     samples, trajectory = _sample_chain(policy, n_samples, seed, estimator)
     terms = _log_ratio_terms(trajectory, etas, sigma0, slope, offset)
     x0 = trajectory[-1]
@@ -253,21 +253,21 @@ def _entropy_lower_bound(
 
     tol = relative_tol(entropy, bound, kl)
     checks = (
-        _worst(
+        worst_check(
             "entropy_bound sample = log ratio of Eq. 5.15 from the documented kernels",
             "Eqs. 5.12-5.15",
             samples,
             terms.sum(0),
             relative_tol(float(np.abs(samples).max())),
         ),
-        _worst(
+        worst_check(
             "sample mean of x^0 = closed-form marginal mean (5 SE)",
             "Eq. 5.14",
             x0.mean(0),
             chain.marginal_mean,
             5 * mean_se,
         ),
-        _worst(
+        worst_check(
             "sample var of x^0 = closed-form marginal var (5 SE)",
             "Eq. 5.14",
             x0.var(0, ddof=1),
@@ -281,7 +281,7 @@ def _entropy_lower_bound(
             bound,
             5 * bound_se,
         ),
-        _worst(
+        worst_check(
             "per-step Monte Carlo contributions to ℓ = closed form (5 SE)",
             "Eqs. 5.15, C.2",
             steps_mc,
@@ -318,7 +318,7 @@ def _entropy_lower_bound(
             -expected_q - bound + log_z,
             relative_tol(kl_joint_target, expected_q, bound, log_z),
         ),
-        _worst(
+        worst_check(
             f"ℓ <= H for n_steps in {tuple(series)}",
             "Eqs. 5.15, C.2",
             s_bound,
@@ -326,14 +326,14 @@ def _entropy_lower_bound(
             relative_tol(*s_entropy, *s_bound),
             "<=",
         ),
-        _worst(
+        worst_check(
             f"H - ℓ = KL for n_steps in {tuple(series)}",
             "Eqs. 5.18, C.2",
             s_entropy - s_bound,
             s_gap,
             relative_tol(*s_entropy, *s_bound),
         ),
-        _worst(
+        worst_check(
             f"Monte Carlo E[entropy_bound] = ℓ for n_steps in {tuple(series)} (5 SE)",
             "Eq. 5.15",
             s_mc,

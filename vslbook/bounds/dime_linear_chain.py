@@ -18,7 +18,13 @@ import numpy as np
 import torch
 from torch import Tensor, nn
 
-from vslbook.bounds._helpers import _count, _linear_gaussian_joint, _np, _positive, _t
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_positive,
+    linear_gaussian_joint,
+    to_numpy,
+    to_tensor,
+)
 from vslbook.dists import gaussian_kl
 from vslbook.srl.diffusion_policy import DiffusionPolicy, DiffusionPolicyConfig, cosine_schedule
 
@@ -87,12 +93,12 @@ def linear_gaussian_policy(
         )
     if not np.all(noise_var > 0):
         raise ValueError(f"noise_var must be positive, got {noise_var}")
-    n_steps = _count("n_steps", n_steps)
+    n_steps = check_count("n_steps", n_steps)
     # dt scale chosen so that the unnormalised cosine schedule sums to ``total_time``
-    dt = _positive("total_time", total_time) / float(cosine_schedule(n_steps).sum())
+    dt = check_positive("total_time", total_time) / float(cosine_schedule(n_steps).sum())
     config = DiffusionPolicyConfig(
         n_steps=n_steps,
-        sigma0=_positive("sigma0", sigma0),
+        sigma0=check_positive("sigma0", sigma0),
         dt=dt,
         learn_beta=False,
         learn_dt=False,
@@ -106,10 +112,10 @@ def linear_gaussian_policy(
         policy = DiffusionPolicy(obs_dim=1, act_dim=noise_var.size, config=config).double()
     with torch.no_grad():
         # noise_var = 1 / softplus(raw)  <=>  raw = log(expm1(1 / noise_var))
-        policy.raw_noise.copy_(_t(np.log(np.expm1(1.0 / noise_var))))
+        policy.raw_noise.copy_(to_tensor(np.log(np.expm1(1.0 / noise_var))))
         nn.init.zeros_(policy.score_net.out.weight)
-        policy.score_net.out.bias.copy_(_t(offset))
-    policy.score_net = AffineScore(policy.score_net, _t(slope))
+        policy.score_net.out.bias.copy_(to_tensor(offset))
+    policy.score_net = AffineScore(policy.score_net, to_tensor(slope))
     return policy
 
 
@@ -163,7 +169,7 @@ def generative_joint(
     coupling = np.zeros((n + 1, n + 1))
     coupling[np.arange(1, n + 1), np.arange(n)] = 1 + eta * (slope - 1 / sigma0**2)
     shift = np.r_[0.0, eta * offset]
-    return _linear_gaussian_joint(coupling, shift, np.r_[sigma0, np.sqrt(2 * eta)])
+    return linear_gaussian_joint(coupling, shift, np.r_[sigma0, np.sqrt(2 * eta)])
 
 
 def noising_joint(
@@ -182,14 +188,16 @@ def noising_joint(
     coupling = np.zeros((n + 1, n + 1))
     coupling[np.arange(n), np.arange(1, n + 1)] = 1 + eta * (slope - 1 / sigma0**2)
     shift = np.r_[eta * offset, mean0]
-    return _linear_gaussian_joint(coupling, shift, np.r_[np.sqrt(2 * eta), math.sqrt(var0)])
+    return linear_gaussian_joint(coupling, shift, np.r_[np.sqrt(2 * eta), math.sqrt(var0)])
 
 
 def gaussian_kl_np(
     mean_p: np.ndarray, cov_p: np.ndarray, mean_q: np.ndarray, cov_q: np.ndarray
 ) -> np.ndarray:
     """Gaussian ``KL(p || q)`` on NumPy arrays, by :func:`vslbook.dists.gaussian_kl`."""
-    return _np(gaussian_kl(_t(mean_p), _t(cov_p), _t(mean_q), _t(cov_q)))
+    return to_numpy(
+        gaussian_kl(to_tensor(mean_p), to_tensor(cov_p), to_tensor(mean_q), to_tensor(cov_q))
+    )
 
 
 def linear_gaussian_chain(
@@ -225,7 +233,7 @@ def linear_gaussian_chain(
     etas = np.asarray(etas, dtype=float)
     if etas.ndim != 2 or not np.all(etas > 0):
         raise ValueError(f"etas must be a positive (N, d) array, got shape {etas.shape}")
-    sigma0 = _positive("sigma0", sigma0)
+    sigma0 = check_positive("sigma0", sigma0)
     n, d = etas.shape
     params = [
         np.broadcast_to(np.asarray(v, dtype=float), (n, d))

@@ -20,20 +20,20 @@ from scipy.optimize import minimize_scalar
 from vslbook.bounds.dime_linear_chain import gaussian_kl_np, generative_joint, noising_joint
 
 
-def _features(s: np.ndarray | float, a: np.ndarray | float) -> np.ndarray:
+def lq_features(s: np.ndarray | float, a: np.ndarray | float) -> np.ndarray:
     """The basis ``(s^2, s a, a^2, s, a, 1)`` of the quadratic Q-functions, shape ``(..., 6)``."""
     s, a = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(a, dtype=float))
     return np.stack([s * s, s * a, a * a, s, a, np.ones_like(s)], -1)
 
 
-def _quadratic(coef: np.ndarray, s: np.ndarray | float) -> np.ndarray:
+def lq_quadratic(coef: np.ndarray, s: np.ndarray | float) -> np.ndarray:
     """``coef[0] s^2 + coef[1] s + coef[2]``."""
     s = np.asarray(s, dtype=float)
     return coef[0] * s * s + coef[1] * s + coef[2]
 
 
 @dataclass(frozen=True)
-class _LinearQuadratic:
+class LinearQuadratic:
     """``s' = A s + B a + w`` with ``w ~ N(0, W)``, ``r(s, a) = -(k_s (s - goal)^2 + k_a a^2) / 2``.
 
     ``alpha`` weighs the entropy bound, ``gamma`` discounts, and the start state is drawn from
@@ -53,13 +53,13 @@ class _LinearQuadratic:
 
     @property
     def reward(self) -> np.ndarray:
-        """``r`` in the basis of :func:`_features`."""
+        """``r`` in the basis of :func:`lq_features`."""
         k_s, g = self.k_s, self.goal
         return np.array([-k_s / 2, 0.0, -self.k_a / 2, k_s * g, 0.0, -k_s * g * g / 2])
 
 
 @dataclass(frozen=True)
-class _Marginal:
+class Marginal:
     """A policy of the family as the evaluation sees it, at every state ``s``.
 
     ``pi_0(a|s) = N(mean_c + mean_g s, var)`` and ``ℓ(s) = bound @ (s^2, s, 1)``.
@@ -77,7 +77,7 @@ class _Marginal:
 
 
 @dataclass(frozen=True)
-class _ChainFamily:
+class ChainFamily:
     """The linear-Gaussian diffusion policies ``Π̃`` of the check.
 
     ``theta = (slope, c_1..c_N, g_1..g_N)``; step ``k`` (sampling order) uses the score
@@ -127,7 +127,7 @@ class _ChainFamily:
             self._cache[key] = (G, cov, rows @ G, const)
         return self._cache[key]
 
-    def marginal(self, theta: np.ndarray) -> _Marginal:
+    def marginal(self, theta: np.ndarray) -> Marginal:
         """The action marginal and ``ℓ(s)`` of Eq. 5.15 from the expected log kernels.
 
         ``ℓ = H(p_N) + sum_k (1/2 - E[u_k^2] / (4 eta_k))`` with the noising residual
@@ -139,13 +139,13 @@ class _ChainFamily:
         u_c, u_g = residual @ c, residual @ g
         w = 1 / (4 * self.eta)
         bound = np.array([-w @ u_g**2, -2 * w @ (u_c * u_g), const - w @ u_c**2])
-        return _Marginal(float(G[-1] @ c), float(G[-1] @ g), float(cov[-1, -1]), bound)
+        return Marginal(float(G[-1] @ c), float(G[-1] @ g), float(cov[-1, -1]), bound)
 
 
-def _evaluate(
-    problem: _LinearQuadratic, pi: _Marginal, bonus: np.ndarray
+def evaluate_policy(
+    problem: LinearQuadratic, pi: Marginal, bonus: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Closed-form ``V^pi`` (coefficients of ``(s^2, s, 1)``) and ``Q^pi`` (:func:`_features`).
+    """Closed-form ``V^pi`` (coefficients of ``(s^2, s, 1)``) and ``Q^pi`` (:func:`lq_features`).
 
     Per-state bonus ``alpha * bonus @ (s^2, s, 1)`` (``ℓ`` for Eqs. 5.16-5.17). ``None`` when
     the closed loop does not contract under the discount (``gamma F^2 >= 1``): ``V = -inf``.
@@ -171,11 +171,11 @@ def _evaluate(
     return np.array([v2, v1, v0]), q
 
 
-def _objective(problem: _LinearQuadratic, value: np.ndarray | None) -> float:
+def lq_objective(problem: LinearQuadratic, value: np.ndarray | None) -> float:
     """``E_{s_0 ~ rho_0}[V(s_0)]`` (Eq. 5.16 from the start distribution); ``-inf`` if unstable."""
     if value is None:
         return -math.inf
-    return float(_quadratic(value, problem.start_mean) + value[0] * problem.start_var)
+    return float(lq_quadratic(value, problem.start_mean) + value[0] * problem.start_var)
 
 
 @cache
@@ -185,9 +185,9 @@ def _hermite(n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
     return x, w / w.sum()
 
 
-def _lq_backup(
-    problem: _LinearQuadratic,
-    pi: _Marginal,
+def lq_backup(
+    problem: LinearQuadratic,
+    pi: Marginal,
     q: Callable[[np.ndarray, np.ndarray], np.ndarray],
     s: np.ndarray,
     a: np.ndarray,
@@ -205,12 +205,14 @@ def _lq_backup(
     s, a = np.broadcast_arrays(np.asarray(s, dtype=float), np.asarray(a, dtype=float))
     s_next = (p.A * s + p.B * a)[..., None] + math.sqrt(p.W) * x
     a_next = (pi.mean_c + pi.mean_g * s_next)[..., None] + math.sqrt(pi.var) * x
-    inner = q(s_next[..., None], a_next) @ w + entropy_sign * p.alpha * _quadratic(pi.bound, s_next)
-    return _features(s, a) @ p.reward + p.gamma * (inner @ w)
+    inner = q(s_next[..., None], a_next) @ w + entropy_sign * p.alpha * lq_quadratic(
+        pi.bound, s_next
+    )
+    return lq_features(s, a) @ p.reward + p.gamma * (inner @ w)
 
 
 @dataclass(frozen=True)
-class _Target:
+class Target:
     """The noising joint of Eq. 5.13 started at ``exp(Q(s, .) / alpha) / Z(s)`` (Eq. 5.23).
 
     For ``Q = q @ features`` with ``q[2] < 0`` the start is ``N(mean_c + mean_g s, var)``;
@@ -225,7 +227,7 @@ class _Target:
     cov: np.ndarray
 
     @classmethod
-    def of(cls, q: np.ndarray, alpha: float, eta: np.ndarray, sigma0: float) -> _Target | None:
+    def of(cls, q: np.ndarray, alpha: float, eta: np.ndarray, sigma0: float) -> Target | None:
         if not q[2] < 0:
             return None  # exp(Q / alpha) is not normalisable in a
         var = -alpha / (2 * q[2])
@@ -237,13 +239,13 @@ class _Target:
         return (self.mean_c + self.mean_g * np.asarray(states, dtype=float))[:, None] * self.unit
 
 
-def _joint_kls(
-    family: _ChainFamily, theta: np.ndarray, target: _Target, states: np.ndarray
+def joint_kls(
+    family: ChainFamily, theta: np.ndarray, target: Target, states: np.ndarray
 ) -> np.ndarray:
     """``KL(pi~_{0:N}(.|s) || ->pi_{0:N}(.|s))`` of Eq. 5.22 at each state (Section 5.4.1's joints).
 
     The generative joints come from :func:`~vslbook.bounds.dime_linear_chain.generative_joint`
-    and the divergence from :func:`vslbook.dists.gaussian_kl`, not from :meth:`_ChainFamily.maps`.
+    and the divergence from :func:`vslbook.dists.gaussian_kl`, not from :meth:`ChainFamily.maps`.
     """
     slope = family.split(theta)[0]
     joints = [
@@ -257,8 +259,8 @@ def _joint_kls(
     )
 
 
-def _improve_exact(
-    family: _ChainFamily, target: _Target, states: np.ndarray, theta_old: np.ndarray
+def improve_exact(
+    family: ChainFamily, target: Target, states: np.ndarray, theta_old: np.ndarray
 ) -> np.ndarray:
     """Minimise ``sum_s KL(pi~^theta_{0:N}(.|s) || ->pi_{0:N}(.|s))`` over ``theta`` (Eq. 5.22).
 
@@ -288,7 +290,7 @@ def _improve_exact(
     return np.r_[best.x, profile(best.x)[1]]
 
 
-def _expected_q(q: np.ndarray, pi: _Marginal, states: np.ndarray) -> np.ndarray:
+def expected_q(q: np.ndarray, pi: Marginal, states: np.ndarray) -> np.ndarray:
     """``E_{a ~ pi_0(.|s)}[Q(s, a)]`` at each state."""
     s = np.asarray(states, dtype=float)
     m = pi.mean_c + pi.mean_g * s
@@ -296,7 +298,7 @@ def _expected_q(q: np.ndarray, pi: _Marginal, states: np.ndarray) -> np.ndarray:
     return moments @ q
 
 
-def _log_partition(q: np.ndarray, alpha: float, states: np.ndarray) -> np.ndarray:
+def log_partition(q: np.ndarray, alpha: float, states: np.ndarray) -> np.ndarray:
     """``log Z(s) = log int exp(Q(s, a) / alpha) da`` (a Gaussian integral, ``q[2] < 0``)."""
     s = np.asarray(states, dtype=float)
     quad = q[2] / alpha
@@ -305,8 +307,10 @@ def _log_partition(q: np.ndarray, alpha: float, states: np.ndarray) -> np.ndarra
     return 0.5 * np.log(math.pi / -quad) + const - lin**2 / (4 * quad)
 
 
-def _lq_problem(rng: np.random.Generator, gamma: float, alpha: float) -> _LinearQuadratic:
-    return _LinearQuadratic(
+def lq_problem(rng: np.random.Generator, gamma: float, alpha: float) -> LinearQuadratic:
+    """A random :class:`LinearQuadratic` problem with discount ``gamma`` and entropy weight
+    ``alpha``, the start state drawn from ``N(0, 1)``."""
+    return LinearQuadratic(
         A=rng.uniform(0.6, 0.95),
         B=rng.uniform(0.5, 1.0),
         W=rng.uniform(0.1, 0.4),

@@ -19,22 +19,28 @@ import numpy as np
 from scipy.optimize import minimize
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _count, _np, _positive, _rng, _worst
 from vslbook.bounds.dime_linear_chain import linear_gaussian_chain, linear_gaussian_policy
 from vslbook.bounds.dime_lq import (
-    _ChainFamily,
-    _evaluate,
-    _expected_q,
-    _features,
-    _improve_exact,
-    _joint_kls,
-    _log_partition,
-    _lq_backup,
-    _lq_problem,
-    _Marginal,
-    _objective,
-    _quadratic,
-    _Target,
+    ChainFamily,
+    Marginal,
+    Target,
+    evaluate_policy,
+    expected_q,
+    improve_exact,
+    joint_kls,
+    log_partition,
+    lq_backup,
+    lq_features,
+    lq_objective,
+    lq_problem,
+    lq_quadratic,
+)
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_positive,
+    seeded_rng,
+    to_numpy,
+    worst_check,
 )
 
 __all__ = ["check_diffusion_policy_iteration"]
@@ -152,17 +158,17 @@ def check_diffusion_policy_iteration(
         ``contraction_ratios`` (n_pairs,), ``pair_kind`` (0 cosine plus constant, 1 constant,
         2 cosine) and ``etas`` (N,: the step sizes).
     """
-    gamma = _positive("gamma", gamma)
+    gamma = check_positive("gamma", gamma)
     if not gamma < 1:
         raise ValueError(f"gamma must lie in (0, 1), got {gamma}")
-    alpha = _positive("alpha", alpha)
-    n_iter, n_backups = _count("n_iter", n_iter), _count("n_backups", n_backups)
-    n_pairs, n_random = _count("n_pairs", n_pairs), _count("n_random", n_random)
-    rng = _rng(seed, 3)
-    problem = _lq_problem(rng, gamma, alpha)
+    alpha = check_positive("alpha", alpha)
+    n_iter, n_backups = check_count("n_iter", n_iter), check_count("n_backups", n_backups)
+    n_pairs, n_random = check_count("n_pairs", n_pairs), check_count("n_random", n_random)
+    rng = seeded_rng(seed, 3)
+    problem = lq_problem(rng, gamma, alpha)
     policy = linear_gaussian_policy(n_steps, sigma0, total_time, [noise_var], [0.0], [0.0], seed)
-    eta = _np(policy.step_sizes)[:, 0].astype(float)
-    family = _ChainFamily(eta, float(sigma0))
+    eta = to_numpy(policy.step_sizes)[:, 0].astype(float)
+    family = ChainFamily(eta, float(sigma0))
     n = family.n
     theta0 = np.r_[rng.uniform(-0.3, 0.3), rng.normal(scale=0.3, size=n), np.zeros(n)]
     for _ in range(1000):  # a small state feedback g with |F| = |A + B m_g| <= 1 (A <= 0.95)
@@ -172,12 +178,12 @@ def check_diffusion_policy_iteration(
     states = np.linspace(-2.0, 2.0, 9)
     s_axis, a_axis = np.linspace(-2.5, 2.5, 21), np.linspace(-3.0, 3.0, 25)
     grid_s, grid_a = np.meshgrid(s_axis, a_axis, indexing="ij")
-    grid = _features(grid_s, grid_a)
+    grid = lq_features(grid_s, grid_a)
 
     def evaluate(theta: np.ndarray, exact_entropy: bool = False):
         pi = family.marginal(theta)
         bonus = np.array([0.0, 0.0, pi.entropy]) if exact_entropy else pi.bound
-        return pi, _evaluate(problem, pi, bonus)
+        return pi, evaluate_policy(problem, pi, bonus)
 
     # ---- Prop. 5.4.1: the backup of Eq. 5.21 for pi_0, against the closed form of Eq. 5.17
     pi0, evaluated = evaluate(theta0)
@@ -188,15 +194,17 @@ def check_diffusion_policy_iteration(
     tol_q = relative_tol(scale)
 
     def backup(q: Callable[[np.ndarray, np.ndarray], np.ndarray], s, a, n_nodes: int):
-        return _lq_backup(problem, pi0, q, s, a, n_nodes, entropy_sign)
+        return lq_backup(problem, pi0, q, s, a, n_nodes, entropy_sign)
 
-    fixed_point = backup(lambda s, a: _features(s, a) @ q_pi, grid_s, grid_a, 4)
+    fixed_point = backup(lambda s, a: lq_features(s, a) @ q_pi, grid_s, grid_a, 4)
     fit_s, fit_a = (x.ravel() for x in np.meshgrid(*2 * [np.linspace(-2, 2, 4)]))
-    fit = _features(fit_s, fit_a)
+    fit = lq_features(fit_s, fit_a)
     q = rng.normal(scale=scale, size=6)  # an arbitrary Q^0
     errors = [np.abs(grid @ q - q_pi_grid).max()]
     for _ in range(n_backups):
-        q = np.linalg.lstsq(fit, backup(lambda s, a, q=q: _features(s, a) @ q, fit_s, fit_a, 4))[0]
+        q = np.linalg.lstsq(fit, backup(lambda s, a, q=q: lq_features(s, a) @ q, fit_s, fit_a, 4))[
+            0
+        ]
         errors.append(np.abs(grid @ q - q_pi_grid).max())
     errors = np.array(errors)
 
@@ -211,9 +219,9 @@ def check_diffusion_policy_iteration(
 
         def q2(s, a, q1=q1, shift=shift, amp=amp, freq=freq, phase=phase):
             bump = shift + amp * np.cos(freq[0] * s + freq[1] * a + phase)
-            return _features(s, a) @ q1 + bump
+            return lq_features(s, a) @ q1 + bump
 
-        t1 = backup(lambda s, a, q1=q1: _features(s, a) @ q1, coarse_s, coarse_a, 20)
+        t1 = backup(lambda s, a, q1=q1: lq_features(s, a) @ q1, coarse_s, coarse_a, 20)
         t2 = backup(q2, coarse_s, coarse_a, 20)
         # sup over (s, a) of |shift + amp cos(.)| is |shift| + |amp| (the phase takes all values)
         ratios.append(np.abs(t1 - t2).max() / (abs(shift) + abs(amp)))
@@ -231,23 +239,23 @@ def check_diffusion_policy_iteration(
             q_grids.append(np.full(grid.shape[:-1], -math.inf))
             break
         last, (value, q) = theta, evaluated
-        objectives.append(_objective(problem, value))
+        objectives.append(lq_objective(problem, value))
         q_grids.append(grid @ q)
         # Q is concave in a for every stable policy of the family, so the target exists
-        target = _Target.of(q, alpha, eta, family.sigma0) if i < n_iter else None
+        target = Target.of(q, alpha, eta, family.sigma0) if i < n_iter else None
         if target is None:
             break
 
-        def kl(th: np.ndarray, target: _Target = target) -> np.ndarray:
-            return _joint_kls(family, np.asarray(th, dtype=float), target, states)
+        def kl(th: np.ndarray, target: Target = target) -> np.ndarray:
+            return joint_kls(family, np.asarray(th, dtype=float), target, states)
 
         if improve is None:
-            new = _improve_exact(family, target, states, theta)
+            new = improve_exact(family, target, states, theta)
         else:
             new = np.asarray(improve(theta.copy(), kl), dtype=float)
         kls.append([kl(theta), kl(new)])
-        rhs = -_quadratic(pi.bound, states) - _expected_q(q, pi, states) / alpha
-        c11.append([kls[-1][0], rhs + _log_partition(q, alpha, states)])
+        rhs = -lq_quadratic(pi.bound, states) - expected_q(q, pi, states) / alpha
+        c11.append([kls[-1][0], rhs + log_partition(q, alpha, states)])
         theta = new
     pad = n_iter + 1 - len(objectives)
     objectives = np.array(objectives + [math.nan] * pad)
@@ -256,14 +264,16 @@ def check_diffusion_policy_iteration(
     kls, c11 = np.array(kls), np.array(c11)  # the improvements that were made (at least one)
 
     def negative_objective(theta: np.ndarray, exact_entropy: bool = False) -> float:
-        return -_objective(problem, (evaluate(theta, exact_entropy)[1] or (None,))[0])
+        return -lq_objective(problem, (evaluate(theta, exact_entropy)[1] or (None,))[0])
 
     def negative_exact(x: np.ndarray) -> float:
         """``-J`` with the exact entropy; it sees only the marginal ``(slope, mean_c, mean_g)``,
         and the offsets reach every affine mean."""
         var = family.maps(x[0])[1][-1, -1]
-        pi = _Marginal(float(x[1]), float(x[2]), float(var), np.zeros(3))
-        return -_objective(problem, (_evaluate(problem, pi, [0, 0, pi.entropy]) or (None,))[0])
+        pi = Marginal(float(x[1]), float(x[2]), float(var), np.zeros(3))
+        return -lq_objective(
+            problem, (evaluate_policy(problem, pi, [0, 0, pi.entropy]) or (None,))[0]
+        )
 
     with np.errstate(invalid="ignore", over="ignore"):  # -J = inf past the stable policies
         direct = minimize(negative_objective, theta0, method="BFGS", options={"gtol": 1e-9})
@@ -285,7 +295,7 @@ def check_diffusion_policy_iteration(
     q_random = np.array(q_random)
 
     pi_last = family.marginal(last)
-    bound_last = _quadratic(pi_last.bound, states)
+    bound_last = lq_quadratic(pi_last.bound, states)
     chains = [
         linear_gaussian_chain(eta[:, None], family.sigma0, last[0], off[:, None])
         for off in family.offsets(last, states)
@@ -304,7 +314,7 @@ def check_diffusion_policy_iteration(
     # is maximal at every state), so their values agree to ~1e-12: 1e-8 relative.
     j_scale = float(np.nanmax(np.abs(objectives[np.isfinite(objectives)]), initial=1.0))
     checks = (
-        _worst(
+        worst_check(
             "T Q^pi = Q^pi: the closed form of Eq. 5.17 (with ℓ) is the backup's fixed point",
             "Eqs. 5.17, 5.21",
             fixed_point,
@@ -326,21 +336,21 @@ def check_diffusion_policy_iteration(
             1e-9,
             "<=",
         ),
-        _worst(
+        worst_check(
             "constant shifts: ||TQ1 - TQ2|| = gamma ||Q1 - Q2|| (the modulus is attained)",
             "Eq. 5.21",
             ratios[kinds == 1],
             gamma,
             1e-9,
         ),
-        _worst(
+        worst_check(
             "joint KL of Eq. 5.22 = -ℓ(s) - E[Q(s, a)] / alpha + log Z(s), every iterate",
             "Eqs. 5.18-5.19, 5.27, C.11",
             c11[:, 0],
             c11[:, 1],
             relative_tol(*np.abs(c11).max((0, 2)).tolist()),
         ),
-        _worst(
+        worst_check(
             "improvement: KL to the target does not increase, at every state",
             "Eq. 5.22, C.16",
             kls[:, 1],
@@ -348,7 +358,7 @@ def check_diffusion_policy_iteration(
             relative_tol(float(np.nanmax(np.abs(kls), initial=0.0))),
             "<=",
         ),
-        _worst(
+        worst_check(
             "improvement: Q^pi_new >= Q^pi_old on the (s, a) grid, every iteration",
             "Prop. 5.4.2, Eqs. C.16-C.28",
             q_grids[:-1],
@@ -356,7 +366,7 @@ def check_diffusion_policy_iteration(
             tol_q,
             "<=",
         ),
-        _worst(
+        worst_check(
             "iteration: J̄(pi_i) is non-decreasing",
             "Eq. 5.16, Prop. 5.4.3",
             objectives[:-1],
@@ -371,14 +381,14 @@ def check_diffusion_policy_iteration(
             -direct.fun,
             relative_tol(objectives[-1], direct.fun, rtol=1e-8),
         ),
-        _worst(
+        worst_check(
             f"iteration: Q^pi_{n_iter} = Q of the direct maximiser of J̄",
             "Prop. 5.4.3",
             q_grids[-1],
             q_direct,
             relative_tol(float(np.abs(q_direct).max()), rtol=1e-8),
         ),
-        _worst(
+        worst_check(
             f"iteration: Q^pi_{n_iter} >= Q^pi of {n_random} random policies in Π̃",
             "Prop. 5.4.3",
             q_random,
@@ -386,7 +396,7 @@ def check_diffusion_policy_iteration(
             tol_q,
             "<=",
         ),
-        _worst(
+        worst_check(
             "ℓ(s) <= H(pi_0(.|s)) for the limit policy",
             "Eq. 5.15",
             bound_last,
@@ -394,7 +404,7 @@ def check_diffusion_policy_iteration(
             relative_tol(pi_last.entropy),
             "<=",
         ),
-        _worst(
+        worst_check(
             "the family's ℓ(s), marginal mean and variance = linear_gaussian_chain (Sec. 5.4.1)",
             "Eqs. 5.14-5.15",
             np.r_[bound_last, family_mean, np.full_like(states, pi_last.var)],

@@ -20,7 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _count, _positive, _rng, _worst
+from vslbook.bounds.toy_numerics import check_count, check_positive, seeded_rng, worst_check
 
 __all__ = [
     "OUProcess",
@@ -53,7 +53,7 @@ class OUProcess:
 
     def __post_init__(self) -> None:
         for name in ("beta_start", "beta_end", "horizon", "eta"):
-            _positive(name, getattr(self, name))
+            check_positive(name, getattr(self, name))
 
     def beta(self, t: np.ndarray | float) -> np.ndarray:
         """``beta_t``, linear in ``t``."""
@@ -237,11 +237,11 @@ def check_score_matching(
         ``denoise_steps``, ``denoise_l1``, ``denoise_density`` (finest) and
         ``target_density`` on ``denoise_grid``.
     """
-    n_samples = _count("n_samples", n_samples, 10)
-    n_fine = _count("n_fine", n_fine, 10)
+    n_samples = check_count("n_samples", n_samples, 10)
+    n_fine = check_count("n_fine", n_fine, 10)
     target_of = conditional_score
     process = OUProcess()
-    rng = _rng(seed, 11)
+    rng = seeded_rng(seed, 11)
     weights = np.array([0.35, 0.65]) + rng.uniform(-0.05, 0.05) * np.array([1, -1])
     means = np.array([-1.5, 1.0]) + rng.uniform(-0.2, 0.2, 2)
     variances = (np.array([0.4, 0.6]) * rng.uniform(0.9, 1.1, 2)) ** 2
@@ -326,7 +326,7 @@ def check_score_matching(
     fit, fit_se, fit_exact = np.array(fit), np.array(fit_se), np.array(fit_exact)
 
     # 5. Eq. 5.10 with the exact score: the a^0 density converges to the target (first order)
-    steps = [_count("denoise_steps entry", n) for n in denoise_steps]
+    steps = [check_count("denoise_steps entry", n) for n in denoise_steps]
     d_grid = np.linspace(-5.0, 5.0, 401)
     target = np.exp(mixture_log_density_and_score(d_grid, weights, means, variances)[0])
     l1, density = [], None
@@ -338,49 +338,49 @@ def check_score_matching(
 
     spread = offsets.max(1) - offsets.min(1)
     checks = (
-        _worst(
+        worst_check(
             "sample mean of a_t | a_0 = e^{-B(t)} a_0 (5 SE + EM bias)",
             "Eq. 5.7",
             s_mean,
             cf_mean,
             tol_mean,
         ),
-        _worst(
+        worst_check(
             "sample var of a_t | a_0 = eta^2 (1 - e^{-2B(t)}) (5 SE + EM bias)",
             "Eq. 5.7",
             s_var,
             cf_var,
             tol_var,
         ),
-        _worst(
+        worst_check(
             "E[grad log ->pi_{t|0}(a_t|a_0) | a_t] = grad log ->pi_t(a_t) (quadrature)",
             "Eq. 5.9",
             posterior,
             exact,
             1e-6 * np.maximum(1, np.abs(exact)),
         ),
-        _worst(
+        worst_check(
             "Eq. 5.9 - explicit score loss = C(t), the same for every f (quadrature)",
             "Eq. 5.9",
             spread,
             0.0,
             1e-7 * np.maximum(1, np.abs(offsets).max(1)),
         ),
-        _worst(
+        worst_check(
             "the true score minimises Eq. 5.9 among the candidates",
             "Eq. 5.9",
             losses[:, 1],
             losses.min(1),
             relative_tol(*losses.ravel(), rtol=1e-9),
         ),
-        _worst(
+        worst_check(
             "least squares on samples = slope and intercept of the marginal score (5 SE)",
             "Eq. 5.9",
             fit,
             fit_exact,
             5 * fit_se,
         ),
-        _worst(
+        worst_check(
             f"Eq. 5.10 with the exact score: L1(a^0 density, target) falls (N = {steps})",
             "Eqs. 5.8, 5.10",
             np.diff(l1),

@@ -54,7 +54,6 @@ from collections.abc import Callable
 import numpy as np
 
 from vslbook.bounds import Check, CheckReport
-from vslbook.bounds._helpers import _worst
 from vslbook.bounds.diskill_samples import (
     GatingFn,
     NormaliserFn,
@@ -66,7 +65,6 @@ from vslbook.bounds.diskill_samples import (
 from vslbook.bounds.diskill_toy import (
     EnergyBoundFn,
     EnergyMoE,
-    _tol,
     ebm_context_entropy,
     ebm_context_objective,
     ebm_curriculum_objective,
@@ -83,13 +81,13 @@ from vslbook.bounds.diskill_toy import (
     self_normalised_expectation,
     uniform_prior_gating,
 )
-from vslbook.bounds.svsl import BoundToy, _auxiliary_bounds
-from vslbook.bounds.svsl import _bound_check as svsl_bound_check
+from vslbook.bounds.svsl import BoundToy, auxiliary_bounds
+from vslbook.bounds.svsl import bound_check as svsl_bound_check
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
-    _perturb_expert,
-    _rng,
+    perturb_expert,
 )
+from vslbook.bounds.toy_numerics import quadrature_tol, seeded_rng, worst_check
 
 __all__ = [
     "EnergyBoundFn",
@@ -153,14 +151,14 @@ def check_curriculum_objective(
     """
     problem = ToyProblem(alpha=alpha, beta=beta)
     bound = bound or ebm_lower_bound
-    rng = _rng(seed, 12)
+    rng = seeded_rng(seed, 12)
     model = random_energy_moe(seed)
     objective = ebm_curriculum_objective(problem, model)
     log_rt, log_rc = ebm_responsibilities(problem, model)
-    bounds, kl_t, kl_c = _auxiliary_bounds(
+    bounds, kl_t, kl_c = auxiliary_bounds(
         problem, model, bound, ebm_expected_responsibility_kls, log_rt, rng, n_auxiliaries
     )
-    tol = _tol(objective, *bounds)
+    tol = quadrature_tol(objective, *bounds)
     own = float(bound(problem, model, log_rt, log_rc))
     fine = ToyProblem(alpha=alpha, beta=beta, n_context=128, n_theta=1201)
     c, c_w = problem.contexts
@@ -181,14 +179,14 @@ def check_curriculum_objective(
             objective,
             tol,
         ),
-        _worst(
+        worst_check(
             f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(bounds)} auxiliaries",
             "Eq. B.1 (A.4)",
             np.full(bounds.shape, objective),
             bounds + alpha * kl_t + (beta - alpha) * kl_c,
             tol,
         ),
-        _worst(
+        worst_check(
             f"bound <= J for {len(bounds)} auxiliaries (needs beta >= alpha)",
             "Eqs. 4.4, 4.5",
             bounds,
@@ -196,8 +194,10 @@ def check_curriculum_objective(
             tol,
             "<=",
         ),
-        _worst("int pi(c|o) dc = 1 (Z_o by adaptive quadrature)", "Eq. 4.6", ctx @ c_w, 1.0, 1e-9),
-        _worst(
+        worst_check(
+            "int pi(c|o) dc = 1 (Z_o by adaptive quadrature)", "Eq. 4.6", ctx @ c_w, 1.0, 1e-9
+        ),
+        worst_check(
             "H[pi(c|o)] = log Z - E[phi] equals -int pi log pi on the grid",
             "Eq. 4.6",
             ebm_context_entropy(problem, model),
@@ -230,7 +230,7 @@ def _perturb_energy(model: EnergyMoE, rng: np.random.Generator, o: int, t: float
     return model.replace(amplitude=amplitude, slope=slope, shift=shift), d
 
 
-#: The energy-based toy for :func:`vslbook.bounds.svsl._bound_check` (π(o) = 1/K scales the
+#: The energy-based toy for :func:`vslbook.bounds.svsl.bound_check` (π(o) = 1/K scales the
 #: per-expert objectives).
 EBM_TOY = BoundToy(
     random_energy_moe, ebm_responsibilities, ebm_curriculum_objective, ebm_lower_bound,
@@ -251,7 +251,7 @@ def _bound_check(
     equation: str,
     title: str,
 ) -> CheckReport:
-    """Chapter 3's bound check (:func:`vslbook.bounds.svsl._bound_check`) on the EBM toy."""
+    """Chapter 3's bound check (:func:`vslbook.bounds.svsl.bound_check`) on the EBM toy."""
     return svsl_bound_check(
         kind, seed, alpha, beta, n_perturbations, perturb, surrogate,
         lambda model, o: 1.0 / model.n_components, equation, title, EBM_TOY,
@@ -290,7 +290,7 @@ def check_expert_bound(
         alpha,
         beta,
         n_perturbations,
-        _perturb_expert,
+        perturb_expert,
         lambda problem, model, aux_t, aux_c, o: objective(problem, model, aux_t, o),
         "Eq. 4.4, B.1",
         "Lower bound for the experts (Eq. 4.4)",

@@ -22,14 +22,13 @@ import numpy as np
 from scipy.special import log_softmax, softmax
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _worst
 from vslbook.bounds.diskill_toy import (
-    _energy_fn,
-    _integrate,
     ebm_context_objective,
     ebm_log_normaliser,
     ebm_responsibilities,
+    energy_fn,
     expert_context_values,
+    integrate_quad,
     mc_normaliser,
     random_energy_moe,
     sample_context_objective,
@@ -38,9 +37,8 @@ from vslbook.bounds.diskill_toy import (
 )
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
-    _count,
-    _rng,
 )
+from vslbook.bounds.toy_numerics import check_count, seeded_rng, worst_check
 
 __all__ = [
     "GatingFn",
@@ -97,7 +95,7 @@ def check_sample_context_objective(
         ``continuous`` (Eq. 4.5 per expert).
     """
     objective = objective or sample_context_objective
-    sizes = tuple(_count("sizes[i]", n, 2) for n in sizes)
+    sizes = tuple(check_count("sizes[i]", n, 2) for n in sizes)
     if len(sizes) < 2 or list(sizes) != sorted(set(sizes)):
         raise ValueError(f"sizes must be at least two increasing batch sizes, got {sizes!r}")
     problem = ToyProblem(alpha=alpha, beta=beta)
@@ -108,7 +106,7 @@ def check_sample_context_objective(
     continuous = np.array(
         [ebm_context_objective(problem, model, log_rt, log_rc, o) for o in range(k)]
     )
-    rng = _rng(seed, 14)
+    rng = seeded_rng(seed, 14)
     c = rng.uniform(problem.low, problem.high, sizes[-1])
     l_c, log_gate = expert_context_values(problem, model, c)
     phi = model.energy(c)
@@ -130,7 +128,7 @@ def check_sample_context_objective(
     tol = 4.0 * se + 1e-9
     spread = offset[:, -1].max() - offset[:, -1].min()
     checks = (
-        _worst(
+        worst_check(
             f"Eq. 4.8 - Eq. 4.5 = beta log(N/V) within 4 s.e., N in {sizes}, {k} experts",
             "Eqs. 4.5, 4.6, 4.8",
             offset,
@@ -211,18 +209,18 @@ def check_energy_normaliser(
         ``expectation``, ``expectation_estimate`` and ``contexts_2d`` (N, 2) with ``phi_2d``.
     """
     estimator = estimator or mc_normaliser
-    n = _count("n_samples", n_samples, 10)
-    rng = _rng(seed, 15)
+    n = check_count("n_samples", n_samples, 10)
+    rng = seeded_rng(seed, 15)
     problem = ToyProblem()
     model = random_energy_moe(seed)
-    phi1 = _energy_fn(model, 0)
+    phi1 = energy_fn(model, 0)
     lo, hi = problem.low, problem.high
 
     def f1(c):
         return np.sin(3.0 * c) + c**2
 
-    z1 = _integrate(lambda c: math.exp(phi1(c)), lo, hi)
-    e1 = _integrate(lambda c: f1(c) * math.exp(phi1(c)), lo, hi) / z1
+    z1 = integrate_quad(lambda c: math.exp(phi1(c)), lo, hi)
+    e1 = integrate_quad(lambda c: f1(c) * math.exp(phi1(c)), lo, hi) / z1
     c1 = rng.uniform(lo, hi, n)
     p1 = model.energy(c1)[0]
     box = ((-1.0, 1.0), (0.0, 1.5))
@@ -247,14 +245,14 @@ def check_energy_normaliser(
         e_se.append(float(math.sqrt(np.sum(q**2 * (fv - q @ fv) ** 2))))
     z_true, e_true = np.array([z1, z2]), np.array([e1, e2])
     checks = (
-        _worst(
+        worst_check(
             f"Z^ = (V/N) sum exp(phi) vs quad (1-D) / Gauss-Legendre (2-D), 4 s.e., N = {n}",
             "Eq. 4.6",
             z_hat,
             z_true,
             4.0 * np.array(z_se),
         ),
-        _worst(
+        worst_check(
             "sum softmax(phi) f = E_pi(c)[f] within 4 s.e. (1-D, 2-D)",
             "Eqs. 4.6, 4.8",
             e_hat,
@@ -320,15 +318,15 @@ def check_gating(
     gating = gating or uniform_prior_gating
     if len(batch_sizes) != 2:
         raise ValueError(f"batch_sizes must be two sizes (small, large), got {batch_sizes!r}")
-    small, large = (_count("batch size", n, 2) for n in batch_sizes)
+    small, large = (check_count("batch size", n, 2) for n in batch_sizes)
     if not small < large:
         raise ValueError(f"batch_sizes must be increasing, got {batch_sizes!r}")
-    repeats = _count("n_repeats", n_repeats, 2)
+    repeats = check_count("n_repeats", n_repeats, 2)
     problem = ToyProblem()
     model = random_energy_moe(seed)
     k = model.n_components
     volume = problem.high - problem.low
-    rng = _rng(seed, 16)
+    rng = seeded_rng(seed, 16)
     log_z = ebm_log_normaliser(problem, model)
     c_eval, c_w = problem.contexts
     phi_eval = model.energy(c_eval)
@@ -368,14 +366,14 @@ def check_gating(
     err_mixed = rms(g_mixed)
     ratio = errors[0] / errors[1] / math.sqrt(large / small)
     checks = (
-        _worst(
+        worst_check(
             f"same batch (N = {large}): categorical gating = density gating with that batch's Z^",
             "Alg. 3, B.3.1",
             g_cat,
             g_dens,
             1e-12,
         ),
-        _worst(
+        worst_check(
             f"batches of sizes {own}: gating = exact gating reweighted by Z_o / S_o",
             "Alg. 3, Eq. 4.6",
             g_mixed,

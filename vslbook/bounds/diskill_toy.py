@@ -24,19 +24,15 @@ import numpy as np
 from scipy.integrate import quad
 from scipy.special import logsumexp, softmax
 
-from vslbook.bounds import relative_tol
 from vslbook.bounds.svsl_toy import (
     ToyProblem,
-    _augmented_expert_rewards,
-    _check_aux,
-    _count,
-    _expert_entropy,
-    _finite,
-    _log_experts,
-    _lse0,
-    _rng,
+    augmented_expert_rewards,
+    check_aux,
+    expert_entropy,
+    log_experts,
     random_toy_moe,
 )
+from vslbook.bounds.toy_numerics import check_count, check_finite, logsumexp0, seeded_rng
 
 __all__ = [
     "EnergyBoundFn",
@@ -50,17 +46,15 @@ __all__ = [
     "ebm_log_normaliser",
     "ebm_lower_bound",
     "ebm_responsibilities",
+    "energy_fn",
     "expert_context_values",
+    "integrate_quad",
     "mc_normaliser",
     "random_energy_moe",
     "sample_context_objective",
     "self_normalised_expectation",
     "uniform_prior_gating",
 ]
-
-
-def _tol(*values: float) -> float:
-    return relative_tol(*values, rtol=1e-8)
 
 
 def _array(name: str, value, ndim: int) -> np.ndarray:
@@ -148,10 +142,10 @@ def random_energy_moe(seed: int = 0, n_components: int = 3, n_features: int = 4)
     ``N(0, 1.5^2)`` (several smooth bumps and steps on the interval: steep enough to make the
     densities multimodal, smooth enough for 64 Gauss-Legendre nodes to integrate them).
     """
-    k = _count("n_components", n_components)
-    j = _count("n_features", n_features)
+    k = check_count("n_components", n_components)
+    j = check_count("n_features", n_features)
     base = random_toy_moe(seed, k)
-    rng = _rng(seed, 11)
+    rng = seeded_rng(seed, 11)
     return EnergyMoE(
         gain=base.gain,
         offset=base.offset,
@@ -162,12 +156,13 @@ def random_energy_moe(seed: int = 0, n_components: int = 3, n_features: int = 4)
     )
 
 
-def _energy_fn(model: EnergyMoE, o: int) -> Callable[[float], float]:
+def energy_fn(model: EnergyMoE, o: int) -> Callable[[float], float]:
+    """``phi_o(c) = sum_j amplitude_oj tanh(slope_oj c + shift_oj)`` as a function of ``c``."""
     a, s, b = model.amplitude[o], model.slope[o], model.shift[o]
     return lambda c: float(a @ np.tanh(s * c + b))
 
 
-def _integrate(fn: Callable[[float], float], low: float, high: float) -> float:
+def integrate_quad(fn: Callable[[float], float], low: float, high: float) -> float:
     """``int_low^high fn`` by adaptive Gauss-Kronrod quadrature to about 13 digits."""
     value, _ = quad(fn, low, high, epsabs=1e-14, epsrel=1e-13, limit=200)
     return float(value)
@@ -180,9 +175,9 @@ def ebm_log_normaliser(problem: ToyProblem, model: EnergyMoE) -> np.ndarray:
     """
     out = np.empty(model.n_components)
     for o in range(model.n_components):
-        phi = _energy_fn(model, o)
+        phi = energy_fn(model, o)
         out[o] = math.log(
-            _integrate(lambda c, phi=phi: math.exp(phi(c)), problem.low, problem.high)
+            integrate_quad(lambda c, phi=phi: math.exp(phi(c)), problem.low, problem.high)
         )
     return out
 
@@ -198,8 +193,8 @@ def ebm_context_entropy(
     log_z = ebm_log_normaliser(problem, model) if log_z is None else np.asarray(log_z)
     out = np.empty(model.n_components)
     for o in range(model.n_components):
-        phi, lz = _energy_fn(model, o), float(log_z[o])
-        mean_phi = _integrate(
+        phi, lz = energy_fn(model, o), float(log_z[o])
+        mean_phi = integrate_quad(
             lambda c, phi=phi, lz=lz: phi(c) * math.exp(phi(c) - lz), problem.low, problem.high
         )
         out[o] = lz - mean_phi
@@ -230,9 +225,9 @@ def ebm_responsibilities(problem: ToyProblem, model: EnergyMoE) -> tuple[np.ndar
         ``pi(o|c, theta) = pi(theta|c, o) pi(o|c) / pi(theta|c)``.
     """
     log_joint_c = np.log(model.weights)[:, None] + ebm_log_contexts(problem, model)
-    log_gate = log_joint_c - _lse0(log_joint_c, keepdims=True)
-    log_joint_t = log_gate[:, :, None] + _log_experts(problem, model)
-    return log_joint_t - _lse0(log_joint_t, keepdims=True), log_gate
+    log_gate = log_joint_c - logsumexp0(log_joint_c, keepdims=True)
+    log_joint_t = log_gate[:, :, None] + log_experts(problem, model)
+    return log_joint_t - logsumexp0(log_joint_t, keepdims=True), log_gate
 
 
 def ebm_curriculum_objective(problem: ToyProblem, model: EnergyMoE) -> float:
@@ -244,8 +239,8 @@ def ebm_curriculum_objective(problem: ToyProblem, model: EnergyMoE) -> float:
     """
     c_w, t_w = problem.contexts[1], problem.thetas[1]
     log_joint_c = np.log(model.weights)[:, None] + _grid_log_contexts(problem, model)
-    log_pc = _lse0(log_joint_c)
-    log_pt = _lse0((log_joint_c - log_pc)[:, :, None] + _log_experts(problem, model))
+    log_pc = logsumexp0(log_joint_c)
+    log_pt = logsumexp0((log_joint_c - log_pc)[:, :, None] + log_experts(problem, model))
     per_context = (np.exp(log_pt) * (problem.rewards - problem.alpha * log_pt)) @ t_w
     pc = np.exp(log_pc)
     kl = float(np.sum(c_w * pc * (log_pc - problem.log_p)))
@@ -268,19 +263,19 @@ def ebm_lower_bound(
     own responsibilities it is Eq. B.1 itself (= Eq. 4.3); otherwise it is Eq. 4.3 minus
     ``alpha E[KL_theta] + (beta - alpha) E[KL_c]``.
     """
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     c_w = problem.contexts[1]
     a, b = problem.alpha, problem.beta
     log_z = ebm_log_normaliser(problem, model)
     ctx = np.exp(ebm_log_contexts(problem, model, log_z))
     per_context = (
-        _augmented_expert_rewards(problem, model, log_aux_theta)
+        augmented_expert_rewards(problem, model, log_aux_theta)
         + b * problem.log_p
         + (b - a) * log_aux_context
     )
     per_expert = (
         (ctx * per_context) @ c_w
-        + a * _expert_entropy(model)
+        + a * expert_entropy(model)
         + b * ebm_context_entropy(problem, model, log_z)
     )
     return float(np.mean(per_expert) + b * math.log(model.n_components))
@@ -290,12 +285,12 @@ def ebm_expected_responsibility_kls(
     problem: ToyProblem, model: EnergyMoE, log_aux_theta: np.ndarray, log_aux_context: np.ndarray
 ) -> tuple[float, float]:
     """``(E[KL(pi(o|c,theta) || aux(o|c,theta))], E_pi(c)[KL(pi(o|c) || aux(o|c))])``."""
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     c_w, t_w = problem.contexts[1], problem.thetas[1]
     log_rt, log_rc = ebm_responsibilities(problem, model)
     log_joint_c = np.log(model.weights)[:, None] + ebm_log_contexts(problem, model)
-    pc = np.exp(_lse0(log_joint_c))
-    joint = np.exp(log_joint_c[:, :, None] + _log_experts(problem, model))
+    pc = np.exp(logsumexp0(log_joint_c))
+    joint = np.exp(log_joint_c[:, :, None] + log_experts(problem, model))
     kl_theta = float(np.einsum("kct,kct,c,t->", joint, log_rt - log_aux_theta, c_w, t_w))
     kl_ctx = float(np.sum(c_w * pc * np.sum(np.exp(log_rc) * (log_rc - log_aux_context), 0)))
     return kl_theta, kl_ctx
@@ -316,17 +311,15 @@ def ebm_expert_objective(
     ``E_pi(c|o),pi(theta|c,o)[R + alpha log aux(o|c,theta)] + alpha E_pi(c|o)[H[pi(theta|c,o)]]``.
     """
     o = _component(model, o)
-    log_aux_theta, _ = _check_aux(
+    log_aux_theta, _ = check_aux(
         problem,
         model,
         log_aux_theta,
         np.full((model.n_components, problem.n_context), -math.log(model.n_components)),
     )
     ctx = np.exp(ebm_log_contexts(problem, model))[o]
-    aug = _augmented_expert_rewards(problem, model, log_aux_theta)[o]
-    return float(
-        np.sum(problem.contexts[1] * ctx * aug) + problem.alpha * _expert_entropy(model)[o]
-    )
+    aug = augmented_expert_rewards(problem, model, log_aux_theta)[o]
+    return float(np.sum(problem.contexts[1] * ctx * aug) + problem.alpha * expert_entropy(model)[o])
 
 
 def ebm_context_objective(
@@ -343,13 +336,11 @@ def ebm_context_objective(
     ``pi(c|o)`` is the energy-based density of Eq. 4.6.
     """
     o = _component(model, o)
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     a, b = problem.alpha, problem.beta
     log_z = ebm_log_normaliser(problem, model)
     ctx = np.exp(ebm_log_contexts(problem, model, log_z))[o]
-    l_c = (
-        _augmented_expert_rewards(problem, model, log_aux_theta)[o] + a * _expert_entropy(model)[o]
-    )
+    l_c = augmented_expert_rewards(problem, model, log_aux_theta)[o] + a * expert_entropy(model)[o]
     expected = float(np.sum(problem.contexts[1] * ctx * (l_c + (b - a) * log_aux_context[o])))
     return expected + b * float(ebm_context_entropy(problem, model, log_z)[o])
 
@@ -376,12 +367,12 @@ def expert_context_values(
         raise ValueError(
             f"contexts must lie in [{problem.low}, {problem.high}], got [{c.min()}, {c.max()}]"
         )
-    n = _count("n_nodes", n_nodes, 8)
+    n = check_count("n_nodes", n_nodes, 8)
     nodes = replace(problem, n_context=n)
     log_rt, _ = ebm_responsibilities(nodes, model)
     l_nodes = (
-        _augmented_expert_rewards(nodes, model, log_rt)
-        + problem.alpha * _expert_entropy(model)[:, None]
+        augmented_expert_rewards(nodes, model, log_rt)
+        + problem.alpha * expert_entropy(model)[:, None]
     )  # (K, n)
     x, w = np.polynomial.legendre.leggauss(n)
     vander = np.polynomial.legendre.legvander(x, n - 1)  # (n, n)
@@ -391,7 +382,7 @@ def expert_context_values(
     l_c = np.polynomial.legendre.legval(u, coef)  # (K, len(c))
     log_z = ebm_log_normaliser(problem, model)
     log_joint = np.log(model.weights)[:, None] + model.energy(c) - log_z[:, None]
-    return l_c, log_joint - _lse0(log_joint, keepdims=True)
+    return l_c, log_joint - logsumexp0(log_joint, keepdims=True)
 
 
 def sample_context_objective(
@@ -421,8 +412,8 @@ def sample_context_objective(
         )
     if abs(logsumexp(log_probs)) > 1e-8:
         raise ValueError("log_probs must be normalised over the batch (logsumexp = 0)")
-    a = _finite("alpha", alpha, 0.0, strict=True)
-    b = _finite("beta", beta, 0.0)
+    a = check_finite("alpha", alpha, 0.0, strict=True)
+    b = check_finite("beta", beta, 0.0)
     q = np.exp(log_probs)
     return float(q @ l_c + q @ ((b - a) * log_aux_context - b * log_probs))
 
@@ -435,7 +426,7 @@ def mc_normaliser(phi: np.ndarray, volume: float) -> float:
     ``softmax_i phi(c_i)``, and it is what turns into ``beta log(N / V)`` in Eq. 4.8.
     """
     phi = _array("phi", phi, 1)
-    v = _finite("volume", volume, 0.0, strict=True)
+    v = check_finite("volume", volume, 0.0, strict=True)
     return float(v * np.exp(logsumexp(phi) - math.log(phi.size)))
 
 

@@ -12,7 +12,13 @@ import numpy as np
 from scipy.special import logsumexp, softmax, xlogy
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _check_distribution, _count, _positive, _rng, _worst
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_distribution,
+    check_positive,
+    seeded_rng,
+    worst_check,
+)
 
 
 def self_paced_problem(
@@ -24,7 +30,7 @@ def self_paced_problem(
         ``(contexts, p, returns)``: the grid ``(n,)``, the probability masses of the uniform
         ``p(c)`` and ``R(c) = 2 exp(-(c / 1.5)^2)`` (contexts near 0 are easy).
     """
-    n_points = _count("n_points", n_points, 2)
+    n_points = check_count("n_points", n_points, 2)
     if not high > low:
         raise ValueError(f"high must exceed low, got low={low!r}, high={high!r}")
     contexts = np.linspace(low, high, n_points)
@@ -35,13 +41,13 @@ def _check_curriculum(p: np.ndarray, returns: np.ndarray) -> tuple[np.ndarray, n
     returns = np.asarray(returns, dtype=float)
     if returns.ndim != 1:
         raise ValueError(f"returns must have shape (n,), got {returns.shape}")
-    return _check_distribution("p", p, returns.shape), returns
+    return check_distribution("p", p, returns.shape), returns
 
 
 def self_paced_objective(pi: np.ndarray, p: np.ndarray, returns: np.ndarray, beta: float) -> float:
     """Self-paced objective ``E_pi[R] - beta KL(pi || p)`` of Eq. 2.44 on a discrete grid."""
     p, returns = _check_curriculum(p, returns)
-    pi = _check_distribution("pi", pi, p.shape)
+    pi = check_distribution("pi", pi, p.shape)
     kl = float(np.sum(xlogy(pi, pi) - xlogy(pi, p)))
     return float(pi @ returns) - beta * kl
 
@@ -49,7 +55,7 @@ def self_paced_objective(pi: np.ndarray, p: np.ndarray, returns: np.ndarray, bet
 def self_paced_optimum(beta: float, p: np.ndarray, returns: np.ndarray) -> np.ndarray:
     """Maximiser of Eq. 2.44: ``pi*(c) ∝ p(c) exp(R(c) / beta)``, as masses on the grid."""
     p, returns = _check_curriculum(p, returns)
-    return softmax(np.log(p) + returns / _positive("beta", beta))
+    return softmax(np.log(p) + returns / check_positive("beta", beta))
 
 
 def check_self_paced(
@@ -74,10 +80,10 @@ def check_self_paced(
         Report with data ``contexts``, ``p``, ``returns``, ``betas``, ``pi`` (n_beta, n),
         ``kl``, ``expected_return`` and ``objective`` per beta.
     """
-    betas = np.asarray([_positive("beta", b) for b in betas])
+    betas = np.asarray([check_positive("beta", b) for b in betas])
     if betas.size < 2 or np.any(np.diff(betas) <= 0):
         raise ValueError(f"betas must be at least two increasing values, got {betas}")
-    rng = _rng(seed)
+    rng = seeded_rng(seed)
     contexts, p, returns = self_paced_problem()
     pis = np.stack([optimum(b, p, returns) for b in betas])
     kl = np.array([np.sum(xlogy(pi, pi) - xlogy(pi, p)) for pi in pis])
@@ -103,7 +109,7 @@ def check_self_paced(
     var_r = float(p @ (returns - p @ returns) ** 2)
     asymptote = var_r / (2 * betas[-1] ** 2)
     checks = (
-        _worst(
+        worst_check(
             "pi* beats perturbed and Gaussian-shaped context distributions",
             "Eq. 2.44",
             best_other,
@@ -111,11 +117,13 @@ def check_self_paced(
             tol,
             "<=",
         ),
-        _worst("J(pi*) = beta log E_p[exp(R / beta)]", "Eq. 2.44", objective, free_energy, tol),
-        _worst(
+        worst_check(
+            "J(pi*) = beta log E_p[exp(R / beta)]", "Eq. 2.44", objective, free_energy, tol
+        ),
+        worst_check(
             "KL(pi*_beta || p) decreases as beta grows", "Eq. 2.44", kl[1:], kl[:-1], 1e-12, "<="
         ),
-        _worst(
+        worst_check(
             "E_pi*[R] decreases as beta grows (easy contexts first)",
             "Eq. 2.44",
             pis[1:] @ returns,

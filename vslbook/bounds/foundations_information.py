@@ -12,7 +12,7 @@ import numpy as np
 from scipy.special import xlogy
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _check_distribution, _count, _rng, _worst
+from vslbook.bounds.toy_numerics import check_count, check_distribution, seeded_rng, worst_check
 
 
 def _entropy(p: np.ndarray, axis: int = -1) -> np.ndarray:
@@ -39,8 +39,8 @@ def check_mutual_information(
     Returns:
         Report with data ``p_zs``, ``mi`` and ``bounds`` (one per random ``q``).
     """
-    nz, ns = _count("n_z", n_z), _count("n_s", n_s)
-    rng = _rng(seed)
+    nz, ns = check_count("n_z", n_z), check_count("n_s", n_s)
+    rng = seeded_rng(seed)
     p_zs = rng.dirichlet(np.ones(nz * ns)).reshape(nz, ns)
     p_z, p_s = p_zs.sum(1), p_zs.sum(0)
     p_z_given_s = p_zs / p_s[None, :]
@@ -57,12 +57,14 @@ def check_mutual_information(
         kl = np.sum(xlogy(p_z_given_s, p_z_given_s) - p_z_given_s * np.log(q_z_given_s), 0)
         return float(p_s @ kl)
 
-    randoms = [rng.dirichlet(np.ones(nz), size=ns).T for _ in range(_count("n_random", n_random))]
+    randoms = [
+        rng.dirichlet(np.ones(nz), size=ns).T for _ in range(check_count("n_random", n_random))
+    ]
     bounds = np.array([bound(q) for q in randoms])
     cand = (
         p_z_given_s
         if posterior is None
-        else _check_distribution("posterior(p_zs)", posterior(p_zs), (nz, ns), axis=0)
+        else check_distribution("posterior(p_zs)", posterior(p_zs), (nz, ns), axis=0)
     )
     tol = relative_tol(mi_72)
     checks = (
@@ -77,7 +79,7 @@ def check_mutual_information(
             tol,
             "<=",
         ),
-        _worst(
+        worst_check(
             "I - bound = E_p(s)[KL(p(z|s)||q(z|s))]",
             "Eq. 2.73",
             mi_72 - bounds,

@@ -15,7 +15,13 @@ import numpy as np
 from scipy.special import xlogy
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _check_distribution, _count, _positive, _rng, _worst
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_distribution,
+    check_positive,
+    seeded_rng,
+    worst_check,
+)
 
 
 def random_mdp(n_states: int = 6, n_actions: int = 3, seed: int = 0) -> tuple[np.ndarray, ...]:
@@ -25,19 +31,21 @@ def random_mdp(n_states: int = 6, n_actions: int = 3, seed: int = 0) -> tuple[np
         ``(P, R)``: transition probabilities ``P[s, a, s']`` of shape ``(S, A, S)`` (Eq. 2.1,
         rows from a Dirichlet(0.5)) and rewards ``R[s, a]`` uniform in ``[-1, 1]``.
     """
-    n_states, n_actions = _count("n_states", n_states), _count("n_actions", n_actions)
-    rng = _rng(seed)
+    n_states, n_actions = check_count("n_states", n_states), check_count("n_actions", n_actions)
+    rng = seeded_rng(seed)
     P = rng.dirichlet(np.full(n_states, 0.5), size=(n_states, n_actions))
     R = rng.uniform(-1.0, 1.0, size=(n_states, n_actions))
     return P, R
 
 
-def _check_mdp(P: np.ndarray, R: np.ndarray, gamma: float, alpha: float) -> tuple[np.ndarray, ...]:
+def check_mdp(P: np.ndarray, R: np.ndarray, gamma: float, alpha: float) -> tuple[np.ndarray, ...]:
+    """``(P, R)`` as float arrays; ValueError unless ``R`` is ``(S, A)``, ``P`` an ``(S, A, S)``
+    transition kernel, ``0 <= gamma < 1`` and ``alpha >= 0``."""
     P, R = np.asarray(P, dtype=float), np.asarray(R, dtype=float)
     if R.ndim != 2:
         raise ValueError(f"R must have shape (S, A), got {R.shape}")
     S, A = R.shape
-    _check_distribution("P", P, (S, A, S))
+    check_distribution("P", P, (S, A, S))
     if not 0.0 <= gamma < 1.0:
         raise ValueError(f"gamma must lie in [0, 1), got {gamma!r}")
     if not alpha >= 0.0:
@@ -103,9 +111,9 @@ def soft_value_iteration(
         tol: stop when the sup-norm change of ``V`` drops below ``tol``.
         max_iter: iteration cap; ``RuntimeError`` if it is reached.
     """
-    P, R = _check_mdp(P, R, gamma, alpha)
-    _positive("tol", tol)
-    max_iter = _count("max_iter", max_iter)
+    P, R = check_mdp(P, R, gamma, alpha)
+    check_positive("tol", tol)
+    max_iter = check_count("max_iter", max_iter)
     v, n_iter, change = np.zeros(R.shape[0]), 0, np.inf
     while change >= tol:
         if n_iter == max_iter:
@@ -129,8 +137,8 @@ def soft_policy_evaluation(
     Returns:
         ``(v, q)`` of shapes ``(S,)`` and ``(S, A)``.
     """
-    P, R = _check_mdp(P, R, gamma, alpha)
-    policy = _check_distribution("policy", policy, R.shape)
+    P, R = check_mdp(P, R, gamma, alpha)
+    policy = check_distribution("policy", policy, R.shape)
     entropy = -xlogy(policy, policy).sum(-1)
     r_pi = (policy * R).sum(-1) + alpha * entropy
     p_pi = np.einsum("sa,sat->st", policy, P)
@@ -152,7 +160,7 @@ def maxent_objective(
     """
     v, _ = soft_policy_evaluation(P, R, policy, gamma, alpha)
     rho0 = (
-        np.full(v.shape, 1 / v.size) if rho0 is None else _check_distribution("rho0", rho0, v.shape)
+        np.full(v.shape, 1 / v.size) if rho0 is None else check_distribution("rho0", rho0, v.shape)
     )
     return float(rho0 @ v)
 
@@ -184,9 +192,9 @@ def check_soft_optimal_policy(
         per alpha) and ``v_gap_bound``.
     """
     P, R = random_mdp(n_states, n_actions, seed)
-    rng = _rng(seed, 1)
+    rng = seeded_rng(seed, 1)
     sol = soft_value_iteration(P, R, gamma, alpha)
-    pi = sol.policy if policy is None else _check_distribution("policy", policy, R.shape)
+    pi = sol.policy if policy is None else check_distribution("policy", policy, R.shape)
     v_pi, q_pi = soft_policy_evaluation(P, R, pi, gamma, alpha)
     j_pi = float(v_pi.mean())
 
@@ -196,7 +204,7 @@ def check_soft_optimal_policy(
     j_random = np.array(
         [
             j(rng.dirichlet(np.ones(n_actions), size=n_states))
-            for _ in range(_count("n_random", n_random))
+            for _ in range(check_count("n_random", n_random))
         ]
     )
     j_perturbed = []
@@ -219,7 +227,7 @@ def check_soft_optimal_policy(
     bound = alphas * math.log(n_actions) / (1 - gamma)
     tol = relative_tol(*sol.v)
     checks = (
-        _worst(
+        worst_check(
             "policy evaluation of pi equals V_soft in every state",
             "Eqs. 2.40-2.42",
             v_pi,
@@ -242,14 +250,14 @@ def check_soft_optimal_policy(
             tol,
             "<=",
         ),
-        _worst(
+        worst_check(
             "V_soft -> V* as alpha -> 0 (within alpha log|A| / (1 - gamma))",
             "Eq. 2.41",
             v_alpha[0],
             v_hard,
             bound[0],
         ),
-        _worst("V_soft >= V* for every alpha", "Eq. 2.41", v_hard[None], v_alpha, tol, "<="),
+        worst_check("V_soft >= V* for every alpha", "Eq. 2.41", v_hard[None], v_alpha, tol, "<="),
     )
     data = {
         "q": sol.q,

@@ -14,7 +14,7 @@ import torch
 from scipy.stats import multivariate_normal
 
 from vslbook.bounds import Check, CheckReport
-from vslbook.bounds._helpers import _count, _np, _rng, _t, _worst
+from vslbook.bounds.toy_numerics import check_count, seeded_rng, to_numpy, to_tensor, worst_check
 from vslbook.dists import LinearGaussianMoE
 
 
@@ -53,18 +53,18 @@ def check_moe_gating(
         Report with data ``contexts`` (n_c,), ``gating`` (n_c, K), ``theta`` (n_t,) and
         ``density`` (n_t, n_c) = ``pi(theta | c)`` of a model with 1-D context and parameter.
     """
-    n_components = _count("n_components", n_components)
+    n_components = check_count("n_components", n_components)
     gating = gating or (lambda model, c: model.gating(c))
-    gen = torch.Generator().manual_seed(int(_rng(seed).integers(2**31)))
+    gen = torch.Generator().manual_seed(int(seeded_rng(seed).integers(2**31)))
     model = LinearGaussianMoE.random(n_components, 2, 2, seed=seed)
     c, _ = model.sample_contexts(40, gen)
-    cand = _np(gating(model, c))
+    cand = to_numpy(gating(model, c))
     joint = np.stack(
         [
-            _np(model.weights[o])
-            * multivariate_normal(_np(model.context_means[o]), _np(model.context_covs[o])).pdf(
-                _np(c)
-            )
+            to_numpy(model.weights[o])
+            * multivariate_normal(
+                to_numpy(model.context_means[o]), to_numpy(model.context_covs[o])
+            ).pdf(to_numpy(c))
             for o in range(n_components)
         ],
         axis=-1,
@@ -72,56 +72,62 @@ def check_moe_gating(
     direct = joint / joint.sum(-1, keepdims=True)
 
     theta, _ = model.sample(c, gen)
-    lhs_cond = _np(model.log_prob(theta, c))
-    rhs_cond = _np(model.joint_log_prob(theta, c) - model.context_log_prob(c))
+    lhs_cond = to_numpy(model.log_prob(theta, c))
+    rhs_cond = to_numpy(model.joint_log_prob(theta, c) - model.context_log_prob(c))
 
     # pi(theta | c) over a 2-D parameter grid, for a few contexts.
     masses_2d = []
     for ci in c[:3]:
-        means = _np(model.expert_means(ci))
-        std = np.sqrt(np.max(np.linalg.eigvalsh(_np(model.covs))))
+        means = to_numpy(model.expert_means(ci))
+        std = np.sqrt(np.max(np.linalg.eigvalsh(to_numpy(model.covs))))
         grid, vol = _trapezoid_grid(means.min(0) - 9 * std, means.max(0) + 9 * std, 141)
-        dens = np.exp(_np(model.log_prob(_t(grid), ci)))
+        dens = np.exp(to_numpy(model.log_prob(to_tensor(grid), ci)))
         masses_2d.append(_trapezoid_sum(dens, 2, vol))
 
     # 1-D context and parameter: conditional and joint normalisation.
     m1 = LinearGaussianMoE.random(n_components, 1, 1, seed=seed + 1)
-    c_std = float(np.sqrt(_np(m1.context_covs).max()))
-    c_lo = float(_np(m1.context_means).min()) - 9 * c_std
-    c_hi = float(_np(m1.context_means).max()) + 9 * c_std
-    t_std = float(np.sqrt(_np(m1.covs).max()))
-    ends = _np(m1.expert_means(_t([[c_lo], [c_hi]])))
+    c_std = float(np.sqrt(to_numpy(m1.context_covs).max()))
+    c_lo = float(to_numpy(m1.context_means).min()) - 9 * c_std
+    c_hi = float(to_numpy(m1.context_means).max()) + 9 * c_std
+    t_std = float(np.sqrt(to_numpy(m1.covs).max()))
+    ends = to_numpy(m1.expert_means(to_tensor([[c_lo], [c_hi]])))
     t_lo, t_hi = float(ends.min()) - 9 * t_std, float(ends.max()) + 9 * t_std
     contexts = np.linspace(c_lo, c_hi, 161)
     thetas = np.linspace(t_lo, t_hi, 401)
     tt, cc = np.meshgrid(thetas, contexts, indexing="ij")
-    cond = np.exp(_np(m1.log_prob(_t(tt[..., None]), _t(cc[..., None]))))
-    joint_2d = np.exp(_np(m1.joint_log_prob(_t(tt[..., None]), _t(cc[..., None]))))
+    cond = np.exp(to_numpy(m1.log_prob(to_tensor(tt[..., None]), to_tensor(cc[..., None]))))
+    joint_2d = np.exp(
+        to_numpy(m1.joint_log_prob(to_tensor(tt[..., None]), to_tensor(cc[..., None])))
+    )
     dt, dc = thetas[1] - thetas[0], contexts[1] - contexts[0]
     masses_1d = np.trapezoid(cond, dx=dt, axis=0)
     joint_mass = np.trapezoid(np.trapezoid(joint_2d, dx=dt, axis=0), dx=dc)
-    context_mass = np.trapezoid(np.exp(_np(m1.context_log_prob(_t(contexts[:, None])))), dx=dc)
+    context_mass = np.trapezoid(
+        np.exp(to_numpy(m1.context_log_prob(to_tensor(contexts[:, None])))), dx=dc
+    )
 
     # Sampling: mean of theta | c against sum_o pi(o | c) mu_o(c).
     c0 = c[:1].expand(20000, 2)
     samples, _ = model.sample(c0, gen)
-    mix_mean = _np(model.gating(c[0]) @ model.expert_means(c[0]))
-    se = _np(samples.std(0)) / math.sqrt(samples.shape[0])
+    mix_mean = to_numpy(model.gating(c[0]) @ model.expert_means(c[0]))
+    se = to_numpy(samples.std(0)) / math.sqrt(samples.shape[0])
 
     checks = (
-        _worst(
+        worst_check(
             "gating pi(o|c) = p(o, c) / sum_o' p(o', c) (scipy densities)",
             "Eqs. 2.48, 2.64",
             cand,
             direct,
             1e-10,
         ),
-        _worst("gating sums to 1 over experts", "Eq. 2.48", cand.sum(-1), 1.0, 1e-12),
-        _worst(
+        worst_check("gating sums to 1 over experts", "Eq. 2.48", cand.sum(-1), 1.0, 1e-12),
+        worst_check(
             "log pi(theta|c) = log p(theta, c) - log p(c)", "Eq. 2.48", lhs_cond, rhs_cond, 1e-10
         ),
-        _worst("integral of pi(theta|c) d theta = 1 (1-D grid)", "Eq. 2.48", masses_1d, 1.0, 1e-6),
-        _worst(
+        worst_check(
+            "integral of pi(theta|c) d theta = 1 (1-D grid)", "Eq. 2.48", masses_1d, 1.0, 1e-6
+        ),
+        worst_check(
             "integral of pi(theta|c) d theta = 1 (2-D grid)",
             "Eq. 2.48",
             np.array(masses_2d),
@@ -132,17 +138,17 @@ def check_moe_gating(
         Check(
             "integral of p(theta, c) d theta dc = 1 (2-D grid)", "Eq. 2.47", joint_mass, 1.0, 1e-6
         ),
-        _worst(
+        worst_check(
             "sample mean of theta|c = sum_o pi(o|c) mu_o(c) (4 standard errors)",
             "Eq. 2.48",
-            _np(samples.mean(0)),
+            to_numpy(samples.mean(0)),
             mix_mean,
             4 * se,
         ),
     )
     data = {
         "contexts": contexts,
-        "gating": _np(m1.gating(_t(contexts[:, None]))),
+        "gating": to_numpy(m1.gating(to_tensor(contexts[:, None]))),
         "theta": thetas,
         "density": cond,
     }

@@ -12,7 +12,7 @@ from collections.abc import Callable
 import numpy as np
 
 from vslbook.bounds import Check, CheckReport
-from vslbook.bounds._helpers import _count, _positive, _rng
+from vslbook.bounds.toy_numerics import check_count, check_positive, seeded_rng
 
 
 def ou_marginal(
@@ -34,7 +34,7 @@ def ou_marginal(
     t = np.asarray(t, dtype=float)
     if np.any(t < 0):
         raise ValueError(f"t must be non-negative, got {t}")
-    decay = np.exp(-_positive("beta", beta) * t)
+    decay = np.exp(-check_positive("beta", beta) * t)
     var_inf = float(eta) ** 2
     return np.asarray(mean0) * decay, np.asarray(var0) * decay**2 + var_inf * (1 - decay**2)
 
@@ -54,11 +54,11 @@ def simulate_ou(
         ``(n_steps + 1, *x0_samples.shape)``.
     """
     x = np.array(x0_samples, dtype=float)
-    beta, T = _positive("beta", beta), _positive("T", T)
-    n_steps = _count("n_steps", n_steps)
+    beta, T = check_positive("beta", beta), check_positive("T", T)
+    n_steps = check_count("n_steps", n_steps)
     if not eta >= 0:
         raise ValueError(f"eta must be non-negative, got {eta!r}")
-    rng = _rng(seed)
+    rng = seeded_rng(seed)
     dt = T / n_steps
     paths = np.empty((n_steps + 1, *x.shape))
     paths[0] = x
@@ -93,9 +93,9 @@ def check_ou_marginals(
         Report with data ``times``, ``sample_mean``, ``sample_var``, ``exact_mean`` and
         ``exact_var`` (all per step) and ``paths`` (the first 50 sample paths).
     """
-    rng = _rng(seed, 1)
-    x0 = mean0 + math.sqrt(_positive("var0", var0)) * rng.standard_normal(
-        _count("n_samples", n_samples, 2)
+    rng = seeded_rng(seed, 1)
+    x0 = mean0 + math.sqrt(check_positive("var0", var0)) * rng.standard_normal(
+        check_count("n_samples", n_samples, 2)
     )
     times, paths = simulate_ou(x0, beta, eta, T, n_steps, seed)
     dt = T / n_steps

@@ -16,16 +16,16 @@ from scipy.special import log_softmax, logsumexp, softmax, xlogy
 from scipy.stats import norm
 
 from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import (
-    _check_distribution,
-    _count,
-    _linear_gaussian_joint,
-    _np,
-    _positive,
-    _random_spd,
-    _rng,
-    _t,
-    _worst,
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_distribution,
+    check_positive,
+    linear_gaussian_joint,
+    random_spd,
+    seeded_rng,
+    to_numpy,
+    to_tensor,
+    worst_check,
 )
 from vslbook.dists import condition_gaussian, gaussian_kl, log_responsibilities, moe_log_prob
 
@@ -66,26 +66,26 @@ def check_kl_chain_rule(
         Report with data ``marginal_kl``, ``joint_kl``, ``expected_posterior_kl`` (exact),
         ``posterior_kl_samples`` (n_samples,).
     """
-    dx, dz = _count("dim_x", dim_x), _count("dim_z", dim_z)
-    rng = _rng(seed)
+    dx, dz = check_count("dim_x", dim_x), check_count("dim_z", dim_z)
+    rng = seeded_rng(seed)
     d = dx + dz
     mp, mq = rng.normal(size=d), rng.normal(size=d)
-    sp, sq = _random_spd(rng, d), _random_spd(rng, d, 1.5)
+    sp, sq = random_spd(rng, d), random_spd(rng, d, 1.5)
     ix = list(range(dx))
 
     def f(*args: np.ndarray) -> float:
-        return float(_np(kl(*(_t(a) for a in args))))
+        return float(to_numpy(kl(*(to_tensor(a) for a in args))))
 
     def posterior_kl(x: np.ndarray) -> np.ndarray:
-        p_mean, p_cov = condition_gaussian(_t(mp), _t(sp), ix, _t(x))
-        q_mean, q_cov = condition_gaussian(_t(mq), _t(sq), ix, _t(x))
-        return _np(kl(p_mean, p_cov, q_mean, q_cov))
+        p_mean, p_cov = condition_gaussian(to_tensor(mp), to_tensor(sp), ix, to_tensor(x))
+        q_mean, q_cov = condition_gaussian(to_tensor(mq), to_tensor(sq), ix, to_tensor(x))
+        return to_numpy(kl(p_mean, p_cov, q_mean, q_cov))
 
     marginal = f(mp[:dx], sp[:dx, :dx], mq[:dx], sq[:dx, :dx])
     joint = f(mp, sp, mq, sq)
     nodes, weights = _gauss_hermite(mp[:dx], sp[:dx, :dx], 4)
     expected = float(weights @ posterior_kl(nodes))
-    x = rng.multivariate_normal(mp[:dx], sp[:dx, :dx], size=_count("n_samples", n_samples, 2))
+    x = rng.multivariate_normal(mp[:dx], sp[:dx, :dx], size=check_count("n_samples", n_samples, 2))
     samples = posterior_kl(x)
     mc, se = float(samples.mean()), float(samples.std(ddof=1) / math.sqrt(n_samples))
     tol = relative_tol(joint, marginal)
@@ -138,8 +138,8 @@ def check_mixture_estep_bound(
         Report with data ``x``, ``p``, ``q`` (densities on the grid), ``responsibilities``
         (n, K), ``kl`` and ``bounds`` (the bound for each random variational distribution).
     """
-    k = _count("n_components", n_components)
-    rng = _rng(seed)
+    k = check_count("n_components", n_components)
+    rng = seeded_rng(seed)
     weights = rng.dirichlet(np.full(k, 3.0))
     means = rng.uniform(-3.0, 3.0, k)
     covs = rng.uniform(0.4, 1.2, k) ** 2
@@ -147,15 +147,18 @@ def check_mixture_estep_bound(
     q_covs = rng.uniform(0.8, 1.5, 2) ** 2
     x = np.linspace(-15.0, 15.0, 6001)
     dx = x[1] - x[0]
-    args = (_t(np.log(weights)), _t(means[:, None]), _t(covs[:, None, None]))
+    args = (to_tensor(np.log(weights)), to_tensor(means[:, None]), to_tensor(covs[:, None, None]))
     log_pxo = np.log(weights) + norm.logpdf(x[:, None], means, np.sqrt(covs))
-    log_p = _np(moe_log_prob(_t(x[:, None]), *args))
-    log_q = _np(
+    log_p = to_numpy(moe_log_prob(to_tensor(x[:, None]), *args))
+    log_q = to_numpy(
         moe_log_prob(
-            _t(x[:, None]), _t(np.log(q_weights)), _t(q_means[:, None]), _t(q_covs[:, None, None])
+            to_tensor(x[:, None]),
+            to_tensor(np.log(q_weights)),
+            to_tensor(q_means[:, None]),
+            to_tensor(q_covs[:, None, None]),
         )
     )
-    log_resp = _np(log_responsibilities(_t(x[:, None]), *args))
+    log_resp = to_numpy(log_responsibilities(to_tensor(x[:, None]), *args))
     p = np.exp(log_p)
 
     def integrate(values: np.ndarray) -> float:
@@ -170,7 +173,7 @@ def check_mixture_estep_bound(
         return integrate(p * np.sum(np.exp(log_resp) * (log_resp - log_qo), -1))
 
     arbitrary = [np.full((x.size, k), -math.log(k))]
-    for _ in range(_count("n_variational", n_variational)):
+    for _ in range(check_count("n_variational", n_variational)):
         slope, offset = rng.normal(size=k), rng.normal(scale=2.0, size=k)
         arbitrary.append(log_softmax(slope * x[:, None] + offset, axis=-1))
     bounds = np.array([bound(lq) for lq in arbitrary])
@@ -178,7 +181,7 @@ def check_mixture_estep_bound(
     if variational is None:
         log_cand = log_resp
     else:
-        cand = _check_distribution("variational(x)", variational(x), (x.size, k))
+        cand = check_distribution("variational(x)", variational(x), (x.size, k))
         with np.errstate(divide="ignore"):
             log_cand = np.log(cand)
     tol = relative_tol(kl_true)
@@ -192,7 +195,7 @@ def check_mixture_estep_bound(
             tol,
             "<=",
         ),
-        _worst(
+        worst_check(
             "L - KL(p||q) = E_p(x)[KL(p(o|x)||q(o|x))]", "Eq. 2.60", bounds - kl_true, gaps, tol
         ),
         Check("bound is tight for q(o|x) = p(o|x)", "Eq. 2.64", bound(log_cand), kl_true, tol),
@@ -233,13 +236,13 @@ def check_diffusion_kl(
         n = 0..N), ``joint_kl``, ``marginal_kl``, ``expected_posterior_kl``, ``mc_estimate``,
         ``mc_stderr`` and ``log_ratio_samples`` (the first 2000 Monte-Carlo terms).
     """
-    n = _count("n_steps", n_steps)
-    dt = _positive("T", T) / n
-    decay = 1 - _positive("beta", beta) * dt
+    n = check_count("n_steps", n_steps)
+    dt = check_positive("T", T) / n
+    decay = 1 - check_positive("beta", beta) * dt
     if not decay > 0:
         raise ValueError(f"beta * T / n_steps must be < 1 for a stable chain, got {beta * dt:g}")
-    kernel_var = 2 * beta * _positive("eta", eta) ** 2 * dt
-    rng = _rng(seed)
+    kernel_var = 2 * beta * check_positive("eta", eta) ** 2 * dt
+    rng = seeded_rng(seed)
     target_mean, target_std = rng.uniform(-1.0, 1.0), rng.uniform(0.5, 1.5)
     gains = rng.uniform(0.9, 1.4, n)  # gains[n - 1] maps x^n to x^{n-1}
     shifts = rng.normal(scale=0.3, size=n)
@@ -253,25 +256,32 @@ def check_diffusion_kl(
     m_p, c_p = np.zeros((n + 1, n + 1)), np.r_[shifts, 0.0]
     m_p[np.arange(n), np.arange(1, n + 1)] = gains
     std_p = np.r_[np.sqrt(variances), eta]
-    mean_q, cov_q = _linear_gaussian_joint(m_q, c_q, std_q)
-    mean_p, cov_p = _linear_gaussian_joint(m_p, c_p, std_p)
+    mean_q, cov_q = linear_gaussian_joint(m_q, c_q, std_q)
+    mean_p, cov_p = linear_gaussian_joint(m_p, c_p, std_p)
 
-    joint = float(gaussian_kl(_t(mean_p), _t(cov_p), _t(mean_q), _t(cov_q)))
+    joint = float(
+        gaussian_kl(to_tensor(mean_p), to_tensor(cov_p), to_tensor(mean_q), to_tensor(cov_q))
+    )
     marginal = float(
-        gaussian_kl(_t(mean_p[:1]), _t(cov_p[:1, :1]), _t(mean_q[:1]), _t(cov_q[:1, :1]))
+        gaussian_kl(
+            to_tensor(mean_p[:1]),
+            to_tensor(cov_p[:1, :1]),
+            to_tensor(mean_q[:1]),
+            to_tensor(cov_q[:1, :1]),
+        )
     )
     nodes, weights = _gauss_hermite(mean_p[:1], cov_p[:1, :1], 8)
-    post_p = condition_gaussian(_t(mean_p), _t(cov_p), [0], _t(nodes))
-    post_q = condition_gaussian(_t(mean_q), _t(cov_q), [0], _t(nodes))
-    expected = float(weights @ _np(gaussian_kl(*post_p, *post_q)))
+    post_p = condition_gaussian(to_tensor(mean_p), to_tensor(cov_p), [0], to_tensor(nodes))
+    post_q = condition_gaussian(to_tensor(mean_q), to_tensor(cov_q), [0], to_tensor(nodes))
+    expected = float(weights @ to_numpy(gaussian_kl(*post_p, *post_q)))
 
     if forward_log_kernel is None:
 
         def forward_log_kernel(x_next: np.ndarray, x_prev: np.ndarray, step: int) -> np.ndarray:
             return norm.logpdf(x_next, decay * x_prev, math.sqrt(kernel_var))
 
-    rng_mc = _rng(seed, 1)
-    n_samples = _count("n_samples", n_samples, 2)
+    rng_mc = seeded_rng(seed, 1)
+    n_samples = check_count("n_samples", n_samples, 2)
     x = eta * rng_mc.standard_normal(n_samples)
     log_ratio = norm.logpdf(x, 0.0, eta)
     for step in range(n, 0, -1):
@@ -341,9 +351,9 @@ def check_maxent_as_inference(
         Report with data ``q``, ``v``, ``policy`` (the candidate), ``pi_star`` (Eq. 2.71),
         ``pi_numerical`` and ``l_random`` (the objective of each random policy).
     """
-    S, A = _count("n_states", n_states), _count("n_actions", n_actions)
-    alpha = _positive("alpha", alpha)
-    rng = _rng(seed)
+    S, A = check_count("n_states", n_states), check_count("n_actions", n_actions)
+    alpha = check_positive("alpha", alpha)
+    rng = seeded_rng(seed)
     q = rng.normal(scale=2.0, size=(S, A))
     rho = rng.dirichlet(np.ones(S))
     log_z = logsumexp(q / alpha, axis=-1)
@@ -351,7 +361,7 @@ def check_maxent_as_inference(
     log_target = q / alpha - log_z[:, None]
     pi_270 = np.exp(q / alpha) / np.exp(log_z)[:, None]
     pi_271 = np.exp((q - v[:, None]) / alpha)
-    cand = pi_271 if policy is None else _check_distribution("policy", policy, (S, A))
+    cand = pi_271 if policy is None else check_distribution("policy", policy, (S, A))
 
     def objective(pi: np.ndarray) -> float:  # Eq. 2.69
         return float(rho @ np.sum(xlogy(pi, pi) - pi * log_target, -1))
@@ -375,10 +385,10 @@ def check_maxent_as_inference(
         options={"gtol": 1e-12, "ftol": 1e-15, "maxiter": 1000},
     )
     pi_numerical = softmax(result.x.reshape(S, A), axis=-1)
-    randoms = [rng.dirichlet(np.ones(A), size=S) for _ in range(_count("n_random", n_random))]
+    randoms = [rng.dirichlet(np.ones(A), size=S) for _ in range(check_count("n_random", n_random))]
     l_random = np.array([objective(pi) for pi in randoms])
     checks = (
-        _worst(
+        worst_check(
             "Eq. 2.70 exp(Q/alpha)/Z = Eq. 2.71 exp((Q - V)/alpha), V = alpha log Z",
             "Eqs. 2.70-2.71",
             pi_270,
@@ -394,10 +404,10 @@ def check_maxent_as_inference(
             1e-12,
             "<=",
         ),
-        _worst(
+        worst_check(
             "pi equals the numerical minimiser of Eq. 2.69", "Eq. 2.69", cand, pi_numerical, 1e-5
         ),
-        _worst(
+        worst_check(
             "KL(pi||exp(Q/alpha)/Z) = -(E_pi[Q]/alpha + H(pi)) + log Z",
             "Eq. 2.69",
             l_random,

@@ -26,8 +26,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import softmax
 
-from vslbook.bounds import Check, CheckReport, relative_tol
-from vslbook.bounds._helpers import _worst
+from vslbook.bounds import Check, CheckReport
 from vslbook.bounds.svsl_decomposition import (
     context_objective,
     expert_objective,
@@ -41,27 +40,28 @@ from vslbook.bounds.svsl_toy import (
     BoundFn,
     ToyMoE,
     ToyProblem,
-    _count,
-    _log_contexts,
-    _perturb_context,
-    _perturb_expert,
-    _perturb_weights,
-    _random_aux,
-    _rng,
     bimodal_reward,
     decomposed_objective,
     expected_responsibility_kls,
+    log_contexts,
     lower_bound,
     maxent_curriculum_objective,
+    perturb_context,
+    perturb_expert,
+    perturb_weights,
+    random_aux,
     random_toy_moe,
     responsibilities,
 )
+from vslbook.bounds.toy_numerics import check_count, quadrature_tol, seeded_rng, worst_check
 
 __all__ = [
     "BoundFn",
     "ToyMoE",
     "ToyProblem",
+    "auxiliary_bounds",
     "bimodal_reward",
+    "bound_check",
     "check_context_bound",
     "check_expert_bound",
     "check_objective_decomposition",
@@ -86,11 +86,7 @@ __all__ = [
 # ------------------------------------------------------------------------------ checks
 
 
-def _tol(*values: float) -> float:
-    return relative_tol(*values, rtol=1e-8)
-
-
-def _auxiliary_bounds(
+def auxiliary_bounds(
     problem: ToyProblem,
     model: object,
     bound: Callable,
@@ -102,9 +98,9 @@ def _auxiliary_bounds(
     """The bound and its two expected KLs for ``n_auxiliaries`` random auxiliaries plus one
     that is exact in ``theta`` (``log_rt``) and wrong in ``c`` (Eq. A.4's identity)."""
     k = model.n_components  # type: ignore[attr-defined]
-    n = _count("n_auxiliaries", n_auxiliaries)
-    auxes = [_random_aux(rng, problem, k, 1.0) for _ in range(n)]
-    auxes.append((log_rt, _random_aux(rng, problem, k, 2.0)[1]))  # exact in theta, wrong in c
+    n = check_count("n_auxiliaries", n_auxiliaries)
+    auxes = [random_aux(rng, problem, k, 1.0) for _ in range(n)]
+    auxes.append((log_rt, random_aux(rng, problem, k, 2.0)[1]))  # exact in theta, wrong in c
     bounds, kl_t, kl_c = [], [], []
     for aux in auxes:
         bounds.append(float(bound(problem, model, *aux)))
@@ -142,15 +138,15 @@ def check_objective_decomposition(
     """
     problem = ToyProblem(alpha=alpha, beta=beta)
     bound = bound or lower_bound
-    rng = _rng(seed, 2)
+    rng = seeded_rng(seed, 2)
     model = random_toy_moe(seed)
     objective = maxent_curriculum_objective(problem, model)
     log_rt, log_rc = responsibilities(problem, model)
-    bounds, kl_t, kl_c = _auxiliary_bounds(
+    bounds, kl_t, kl_c = auxiliary_bounds(
         problem, model, bound, expected_responsibility_kls, log_rt, rng, n_auxiliaries
     )
     identity_rhs = bounds + alpha * kl_t + (beta - alpha) * kl_c
-    tol = _tol(objective, *bounds)
+    tol = quadrature_tol(objective, *bounds)
     own = float(bound(problem, model, log_rt, log_rc))
     # the same objective from a finer quadrature: the grid is not what makes them agree
     fine = ToyProblem(alpha=alpha, beta=beta, n_context=128, n_theta=1201)
@@ -170,14 +166,14 @@ def check_objective_decomposition(
             objective,
             tol,
         ),
-        _worst(
+        worst_check(
             f"J = bound + alpha E[KL_theta] + (beta-alpha) E[KL_c] for {len(bounds)} auxiliaries",
             "Eq. A.4",
             np.full(bounds.shape, objective),
             identity_rhs,
             tol,
         ),
-        _worst(
+        worst_check(
             f"bound <= J for {len(bounds)} auxiliaries (needs beta >= alpha)",
             "Eq. A.4",
             bounds,
@@ -185,7 +181,9 @@ def check_objective_decomposition(
             tol,
             "<=",
         ),
-        _worst("expected KLs are non-negative", "Eq. A.4", -np.r_[kl_t, kl_c], 0.0, 1e-12, "<="),
+        worst_check(
+            "expected KLs are non-negative", "Eq. A.4", -np.r_[kl_t, kl_c], 0.0, 1e-12, "<="
+        ),
     )
     c, _ = problem.contexts
     data = {
@@ -195,7 +193,7 @@ def check_objective_decomposition(
         "kl_context": kl_c,
         "contexts": c,
         "gating": np.exp(log_rc),
-        "context_density": np.exp(_log_contexts(problem, model)),
+        "context_density": np.exp(log_contexts(problem, model)),
     }
     return CheckReport(
         "Decomposition of the curriculum max-ent objective (Section 3.3.1)", checks, data
@@ -235,7 +233,7 @@ SVSL_TOY = BoundToy(
 )  # fmt: skip
 
 
-def _bound_check(
+def bound_check(
     kind: str,
     seed: int,
     alpha: float,
@@ -250,14 +248,14 @@ def _bound_check(
 ) -> CheckReport:
     """Shared body of the expert, context and weight bound checks (Chapters 3 and 4)."""
     problem = ToyProblem(alpha=alpha, beta=beta)
-    rng = _rng(seed, toy.stream)
+    rng = seeded_rng(seed, toy.stream)
     old = toy.random(seed)
     aux = toy.responsibilities(problem, old)
     j_old = toy.objective(problem, old)
     lb_old = toy.bound(problem, old, *aux)
     s_old = [surrogate(problem, old, *aux, o) for o in range(old.n_components)]
     j_new, lb_new, gap_pred, d_lb, d_sur = [], [], [], [], []
-    for _ in range(_count("n_perturbations", n_perturbations)):
+    for _ in range(check_count("n_perturbations", n_perturbations)):
         o = int(rng.integers(old.n_components))
         new, _ = perturb(old, rng, o, 1.0)
         j = toy.objective(problem, new)
@@ -270,7 +268,7 @@ def _bound_check(
         d_sur.append(surrogate_scale(old, o) * (surrogate(problem, new, *aux, o) - s_old[o]))
     j_new, lb_new, gap_pred = np.array(j_new), np.array(lb_new), np.array(gap_pred)
     d_lb, d_sur = np.array(d_lb), np.array(d_sur)
-    tol = _tol(j_old, *j_new, *lb_new)
+    tol = quadrature_tol(j_old, *j_new, *lb_new)
 
     # one perturbation path through the current model, for plotting
     ts = np.linspace(-1.0, 1.0, 11)
@@ -283,7 +281,7 @@ def _bound_check(
         path_lb.append(toy.bound(problem, m, *aux))
     tight_name, tight_eq = toy.tight
     checks = (
-        _worst(
+        worst_check(
             f"bound(new; aux = old) <= J(new) for {len(j_new)} perturbed {kind}",
             equation,
             lb_new,
@@ -292,21 +290,21 @@ def _bound_check(
             "<=",
         ),
         Check(tight_name, tight_eq or equation, lb_old, j_old, tol),
-        _worst(
+        worst_check(
             "J(new) - bound(new) = alpha E[KL_theta] + (beta-alpha) E[KL_c]",
             toy.gap_equation,
             j_new - lb_new,
             gap_pred,
             tol,
         ),
-        _worst(
+        worst_check(
             toy.change.format(kind=kind),
             equation,
             d_lb,
             d_sur,
             tol,
         ),
-        _worst(
+        worst_check(
             "J(new) - J(old) >= change of the bound (monotonic improvement)",
             equation,
             d_lb,
@@ -353,13 +351,13 @@ def check_expert_bound(
         ``objective_old``.
     """
     objective = objective or expert_objective
-    return _bound_check(
+    return bound_check(
         "experts",
         seed,
         alpha,
         beta,
         n_perturbations,
-        _perturb_expert,
+        perturb_expert,
         lambda problem, model, aux_t, aux_c, o: objective(problem, model, aux_t, o),
         lambda model, o: float(model.weights[o]),
         "Eq. 3.5, A.1.2",
@@ -388,13 +386,13 @@ def check_context_bound(
             :func:`context_objective`.
     """
     objective = objective or context_objective
-    return _bound_check(
+    return bound_check(
         "context distributions",
         seed,
         alpha,
         beta,
         n_perturbations,
-        _perturb_context,
+        perturb_context,
         objective,
         lambda model, o: float(model.weights[o]),
         "Eq. 3.6, A.1.3",
@@ -433,13 +431,13 @@ def check_weight_bound(
         r = np.asarray(rewards(problem, model, aux_t, aux_c), dtype=float)
         return weight_objective(model.weights, r, problem.beta)
 
-    report = _bound_check(
+    report = bound_check(
         "weights",
         seed,
         alpha,
         beta,
         n_perturbations,
-        _perturb_weights,
+        perturb_weights,
         surrogate,
         lambda model, o: 1.0,
         "Eq. 3.7, A.5",
@@ -456,7 +454,7 @@ def check_weight_bound(
     j_old = maxent_curriculum_objective(problem, old)
     j_soft = maxent_curriculum_objective(problem, better)
     lb_soft = lower_bound(problem, better, *aux)
-    tol = _tol(j_old, j_soft)
+    tol = quadrature_tol(j_old, j_soft)
     extra = (
         Check(
             "bound at softmax(r / beta) = Eq. 3.7 there + beta log p(c)",

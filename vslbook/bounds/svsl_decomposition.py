@@ -17,21 +17,21 @@ from scipy.special import logsumexp, softmax
 from vslbook.bounds.svsl_toy import (
     ToyMoE,
     ToyProblem,
-    _augmented_expert_rewards,
-    _check_aux,
-    _context_entropy,
-    _entropy,
-    _expert_entropy,
-    _finite,
-    _kl,
-    _log_contexts,
+    augmented_expert_rewards,
+    check_aux,
+    context_entropy,
+    expert_entropy,
+    log_contexts,
 )
+from vslbook.bounds.toy_numerics import check_finite, discrete_entropy, discrete_kl
 
 __all__ = [
+    "brute_force_reps",
     "context_objective",
     "expert_objective",
     "reps_categorical",
     "reps_dual",
+    "reps_solution",
     "weight_objective",
     "weight_rewards",
 ]
@@ -56,24 +56,23 @@ def expert_objective(
     """
     o = _component(model, o)
     c_w = problem.contexts[1]
-    ctx = np.exp(_log_contexts(problem, model))[o]
-    aug = _augmented_expert_rewards(problem, model, log_aux_theta)[o]
-    return float(np.sum(c_w * ctx * aug) + problem.alpha * _expert_entropy(model)[o])
+    ctx = np.exp(log_contexts(problem, model))[o]
+    aug = augmented_expert_rewards(problem, model, log_aux_theta)[o]
+    return float(np.sum(c_w * ctx * aug) + problem.alpha * expert_entropy(model)[o])
 
 
 def _context_values(
     problem: ToyProblem, model: ToyMoE, log_aux_theta: np.ndarray, log_aux_context: np.ndarray
 ) -> np.ndarray:
     """``E_pi(c|o)[L_c(o, c) + (beta - alpha) log aux(o|c)] + beta H[pi(c|o)]``, shape (K,)."""
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     c_w = problem.contexts[1]
     a, b = problem.alpha, problem.beta
     l_c = (
-        _augmented_expert_rewards(problem, model, log_aux_theta)
-        + a * _expert_entropy(model)[:, None]
+        augmented_expert_rewards(problem, model, log_aux_theta) + a * expert_entropy(model)[:, None]
     )  # L_c(o, c) of Eq. 3.6
-    ctx = np.exp(_log_contexts(problem, model))
-    return (ctx * (l_c + (b - a) * log_aux_context)) @ c_w + b * _context_entropy(problem, model)
+    ctx = np.exp(log_contexts(problem, model))
+    return (ctx * (l_c + (b - a) * log_aux_context)) @ c_w + b * context_entropy(problem, model)
 
 
 def context_objective(
@@ -110,7 +109,7 @@ def weight_objective(weights: np.ndarray, rewards: np.ndarray, beta: float) -> f
         raise ValueError(
             f"weights and rewards must be 1-D of equal shape, got {weights.shape}, {rewards.shape}"
         )
-    return float(weights @ rewards + _finite("beta", beta, 0.0) * _entropy(weights))
+    return float(weights @ rewards + check_finite("beta", beta, 0.0) * discrete_entropy(weights))
 
 
 # ---------------------------------------------------------------- REPS for the weights
@@ -126,7 +125,8 @@ def reps_dual(eta: float, p_old: np.ndarray, rewards: np.ndarray, beta: float, e
     return float(eta * eps + tau * logsumexp((eta * np.log(p_old) + rewards) / tau))
 
 
-def _reps_solution(eta: float, p_old: np.ndarray, rewards: np.ndarray, beta: float) -> np.ndarray:
+def reps_solution(eta: float, p_old: np.ndarray, rewards: np.ndarray, beta: float) -> np.ndarray:
+    """The REPS solution ``softmax((eta log p_old + r) / (eta + beta))`` at multiplier ``eta``."""
     return softmax((eta * np.log(p_old) + rewards) / (eta + beta))
 
 
@@ -152,24 +152,24 @@ def reps_categorical(
         )
     if np.any(p_old <= 0) or abs(p_old.sum() - 1) > 1e-10:
         raise ValueError(f"p_old must be positive and sum to 1, got {p_old}")
-    beta = _finite("beta", beta, 0.0, strict=True)
-    eps = _finite("eps", eps, 0.0, strict=True)
+    beta = check_finite("beta", beta, 0.0, strict=True)
+    eps = check_finite("eps", eps, 0.0, strict=True)
 
     def excess(eta: float) -> float:
-        return _kl(_reps_solution(eta, p_old, rewards, beta), p_old) - eps
+        return discrete_kl(reps_solution(eta, p_old, rewards, beta), p_old) - eps
 
     if excess(0.0) <= 0.0:
-        return _reps_solution(0.0, p_old, rewards, beta), 0.0
+        return reps_solution(0.0, p_old, rewards, beta), 0.0
     upper = 1.0
     while excess(upper) > 0.0:
         upper *= 4.0
         if upper > 1e15:  # pragma: no cover - KL(p_eta || p_old) -> 0 as eta -> inf
             raise RuntimeError("could not bracket the REPS multiplier")
     eta = brentq(excess, 0.0, upper, xtol=1e-14, rtol=1e-14, maxiter=500)
-    return _reps_solution(eta, p_old, rewards, beta), float(eta)
+    return reps_solution(eta, p_old, rewards, beta), float(eta)
 
 
-def _brute_force_reps(p_old: np.ndarray, rewards: np.ndarray, beta: float, eps: float):
+def brute_force_reps(p_old: np.ndarray, rewards: np.ndarray, beta: float, eps: float):
     """The primal problem of :func:`reps_categorical` by SLSQP over the simplex."""
     k = p_old.size
 
@@ -184,7 +184,7 @@ def _brute_force_reps(p_old: np.ndarray, rewards: np.ndarray, beta: float, eps: 
         {"type": "eq", "fun": lambda p: p.sum() - 1.0, "jac": lambda p: np.ones_like(p)},
         {
             "type": "ineq",
-            "fun": lambda p: eps - _kl(np.clip(p, 1e-300, None), p_old),
+            "fun": lambda p: eps - discrete_kl(np.clip(p, 1e-300, None), p_old),
             "jac": lambda p: -(np.log(np.clip(p, 1e-300, None) / p_old) + 1.0),
         },
     )
@@ -201,7 +201,7 @@ def _brute_force_reps(p_old: np.ndarray, rewards: np.ndarray, beta: float, eps: 
         )
         p = np.clip(res.x, 0.0, None)
         p = p / p.sum()
-        if _kl(p, p_old) <= eps + 1e-9 and (best is None or negative(p) < negative(best)):
+        if discrete_kl(p, p_old) <= eps + 1e-9 and (best is None or negative(p) < negative(best)):
             best = p
     if best is None:  # pragma: no cover - p_old itself is feasible
         best = p_old

@@ -20,7 +20,9 @@ Holds the model (:class:`ToyMoE`, :class:`ToyProblem`, :func:`random_toy_moe`), 
 and responsibilities (Eq. 3.4), the curriculum max-ent objective (Eq. 3.3 = A.1), its
 decomposed form (Eq. 3.4 = A.3), the lower bound with auxiliary responsibilities and its two
 gaps (Eq. A.4), and the random auxiliaries and perturbations that the checks of
-:mod:`vslbook.bounds.svsl` draw.
+:mod:`vslbook.bounds.svsl` draw. The small numerical helpers it shares with the other bound
+checks (seeded streams, argument validation, discrete entropies) are in
+:mod:`vslbook.bounds.toy_numerics`.
 """
 
 from __future__ import annotations
@@ -34,63 +36,38 @@ import numpy as np
 from scipy.special import log_softmax, softmax
 from scipy.stats import truncnorm
 
+from vslbook.bounds.toy_numerics import (
+    check_count,
+    check_finite,
+    discrete_entropy,
+    logsumexp0,
+    seeded_rng,
+)
+
 __all__ = [
     "BoundFn",
     "ToyMoE",
     "ToyProblem",
+    "augmented_expert_rewards",
     "bimodal_reward",
+    "check_aux",
+    "context_entropy",
     "decomposed_objective",
     "expected_responsibility_kls",
+    "expert_entropy",
+    "log_contexts",
+    "log_experts",
     "lower_bound",
     "maxent_curriculum_objective",
+    "perturb_context",
+    "perturb_expert",
+    "perturb_weights",
+    "random_aux",
     "random_toy_moe",
     "responsibilities",
 ]
 
 _LOG_2PI = math.log(2.0 * math.pi)
-
-
-# ----------------------------------------------------------------------------- helpers
-
-
-def _rng(seed: int, stream: int = 0) -> np.random.Generator:
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
-    return np.random.default_rng([int(seed), stream])
-
-
-def _count(name: str, value: int, minimum: int = 1) -> int:
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
-        raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
-    return int(value)
-
-
-def _finite(name: str, value: float, minimum: float = -math.inf, strict: bool = False) -> float:
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    ok = ok and math.isfinite(value) and (value > minimum if strict else value >= minimum)
-    if not ok:
-        bound = f"> {minimum}" if strict else f">= {minimum}"
-        raise ValueError(f"{name} must be a finite number {bound}, got {value!r}")
-    return float(value)
-
-
-def _lse0(a: np.ndarray, keepdims: bool = False) -> np.ndarray:
-    """``log sum exp`` over axis 0 (the experts); scipy's version is slow on these sizes."""
-    m = a.max(axis=0, keepdims=True)
-    out = m + np.log(np.exp(a - m).sum(axis=0, keepdims=True))
-    return out if keepdims else out[0]
-
-
-def _entropy(p: np.ndarray) -> float:
-    p = np.asarray(p, dtype=float)
-    nz = p > 0
-    return float(-np.sum(p[nz] * np.log(p[nz])))
-
-
-def _kl(p: np.ndarray, q: np.ndarray) -> float:
-    p, q = np.asarray(p, dtype=float), np.asarray(q, dtype=float)
-    nz = p > 0
-    return float(np.sum(p[nz] * (np.log(p[nz]) - np.log(q[nz]))))
 
 
 # ----------------------------------------------------------------------- the toy model
@@ -164,8 +141,8 @@ def random_toy_moe(seed: int = 0, n_components: int = 3) -> ToyMoE:
     ``linspace(-1.2, 1.2, K)`` with gains in ``[-0.6, 0.6]`` and standard deviations 0.3-0.5,
     weights from a Dirichlet(3).
     """
-    k = _count("n_components", n_components)
-    rng = _rng(seed, 1)
+    k = check_count("n_components", n_components)
+    rng = seeded_rng(seed, 1)
     centres = np.linspace(-1.2, 1.2, k) if k > 1 else np.zeros(1)
     return ToyMoE(
         weights=rng.dirichlet(np.full(k, 3.0)),
@@ -204,16 +181,16 @@ class ToyProblem:
     reward: Callable[[np.ndarray, np.ndarray], np.ndarray] = field(default=bimodal_reward)
 
     def __post_init__(self) -> None:
-        _finite("alpha", self.alpha, 0.0, strict=True)
-        _finite("beta", self.beta, 0.0)
+        check_finite("alpha", self.alpha, 0.0, strict=True)
+        check_finite("beta", self.beta, 0.0)
         for lo, hi, what in (
             (self.low, self.high, "context interval"),
             (self.theta_low, self.theta_high, "parameter range"),
         ):
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise ValueError(f"{what} must satisfy low < high (finite), got [{lo}, {hi}]")
-        _count("n_context", self.n_context, 8)
-        _count("n_theta", self.n_theta, 16)
+        check_count("n_context", self.n_context, 8)
+        check_count("n_theta", self.n_theta, 16)
 
     @property
     def log_p(self) -> float:
@@ -249,14 +226,14 @@ class ToyProblem:
 # ------------------------------------------------------------------ densities on the grid
 
 
-def _log_contexts(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
+def log_contexts(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
     """``log pi(c|o)`` at the context nodes, shape ``(K, n_c)``."""
     c, _ = problem.contexts
     m, s = model.context_mean[:, None], model.context_std[:, None]
     return truncnorm.logpdf(c[None, :], (problem.low - m) / s, (problem.high - m) / s, m, s)
 
 
-def _log_experts(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
+def log_experts(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
     """``log pi(theta|c, o)`` on the grid, shape ``(K, n_c, n_theta)``."""
     c, _ = problem.contexts
     t, _ = problem.thetas
@@ -272,12 +249,12 @@ def _log_experts(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
     return -0.5 * z**2 - np.log(model.std)[:, None, None] - 0.5 * _LOG_2PI
 
 
-def _expert_entropy(model: ToyMoE) -> np.ndarray:
+def expert_entropy(model: ToyMoE) -> np.ndarray:
     """``H[pi(theta|c, o)] = log(2 pi e s_o^2) / 2`` for every expert, shape ``(K,)``."""
     return 0.5 * (_LOG_2PI + 1.0) + np.log(model.std)
 
 
-def _context_entropy(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
+def context_entropy(problem: ToyProblem, model: ToyMoE) -> np.ndarray:
     """``H[pi(c|o)]`` of the truncated Gaussians (scipy closed form), shape ``(K,)``."""
     m, s = model.context_mean, model.context_std
     return np.asarray(truncnorm.entropy((problem.low - m) / s, (problem.high - m) / s, m, s))
@@ -291,10 +268,10 @@ def responsibilities(problem: ToyProblem, model: ToyMoE) -> tuple[np.ndarray, np
         with ``pi(o|c) = pi(c|o) pi(o) / pi(c)`` and
         ``pi(o|c, theta) = pi(theta|c, o) pi(o|c) / pi(theta|c)``.
     """
-    log_joint_c = np.log(model.weights)[:, None] + _log_contexts(problem, model)
-    log_gate = log_joint_c - _lse0(log_joint_c, keepdims=True)
-    log_joint_t = log_gate[:, :, None] + _log_experts(problem, model)
-    return log_joint_t - _lse0(log_joint_t, keepdims=True), log_gate
+    log_joint_c = np.log(model.weights)[:, None] + log_contexts(problem, model)
+    log_gate = log_joint_c - logsumexp0(log_joint_c, keepdims=True)
+    log_joint_t = log_gate[:, :, None] + log_experts(problem, model)
+    return log_joint_t - logsumexp0(log_joint_t, keepdims=True), log_gate
 
 
 def maxent_curriculum_objective(problem: ToyProblem, model: ToyMoE) -> float:
@@ -306,10 +283,10 @@ def maxent_curriculum_objective(problem: ToyProblem, model: ToyMoE) -> float:
     """
     c_w = problem.contexts[1]
     t_w = problem.thetas[1]
-    log_joint_c = np.log(model.weights)[:, None] + _log_contexts(problem, model)
-    log_pc = _lse0(log_joint_c)  # log pi(c)
+    log_joint_c = np.log(model.weights)[:, None] + log_contexts(problem, model)
+    log_pc = logsumexp0(log_joint_c)  # log pi(c)
     log_gate = log_joint_c - log_pc
-    log_pt = _lse0(log_gate[:, :, None] + _log_experts(problem, model))
+    log_pt = logsumexp0(log_gate[:, :, None] + log_experts(problem, model))
     inner = np.exp(log_pt) * (problem.rewards - problem.alpha * log_pt)
     per_context = inner @ t_w
     pc = np.exp(log_pc)
@@ -321,16 +298,18 @@ BoundFn = Callable[[ToyProblem, ToyMoE, np.ndarray, np.ndarray], float]
 """``(problem, model, log_aux_theta (K, n_c, n_t), log_aux_context (K, n_c)) -> value``."""
 
 
-def _augmented_expert_rewards(
+def augmented_expert_rewards(
     problem: ToyProblem, model: ToyMoE, log_aux_theta: np.ndarray, sign: float = 1.0
 ) -> np.ndarray:
     """``E_pi(theta|c,o)[R + alpha log aux(o|c, theta)]`` per expert and context, ``(K, n_c)``."""
     t_w = problem.thetas[1]
     integrand = problem.rewards[None] + sign * problem.alpha * log_aux_theta
-    return (np.exp(_log_experts(problem, model)) * integrand) @ t_w
+    return (np.exp(log_experts(problem, model)) * integrand) @ t_w
 
 
-def _check_aux(problem: ToyProblem, model: ToyMoE, log_aux_theta, log_aux_context):
+def check_aux(problem: ToyProblem, model: ToyMoE, log_aux_theta, log_aux_context):
+    """The auxiliary responsibilities as float arrays; ValueError unless they have shapes
+    ``(K, n_c, n_theta)`` and ``(K, n_c)`` and are log-probabilities over the experts."""
     k, nc, nt = model.n_components, problem.n_context, problem.n_theta
     log_aux_theta = np.asarray(log_aux_theta, dtype=float)
     log_aux_context = np.asarray(log_aux_context, dtype=float)
@@ -343,7 +322,7 @@ def _check_aux(problem: ToyProblem, model: ToyMoE, log_aux_theta, log_aux_contex
         ("log_aux_theta", log_aux_theta[:, ::7, ::37]),
         ("log_aux_context", log_aux_context),
     ):
-        if not np.all(np.abs(_lse0(a)) <= 1e-8):
+        if not np.all(np.abs(logsumexp0(a)) <= 1e-8):
             raise ValueError(f"{name} must be log-probabilities over experts (axis 0 sums to 1)")
     return log_aux_theta, log_aux_context
 
@@ -360,12 +339,12 @@ def lower_bound(
     ``alpha E[KL(pi(o|c,theta) || aux)] + (beta - alpha) E[KL(pi(o|c) || aux)]`` (Eq. A.4),
     hence a lower bound when ``beta >= alpha``.
     """
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     c_w = problem.contexts[1]
     a, b = problem.alpha, problem.beta
-    ctx = np.exp(_log_contexts(problem, model))
+    ctx = np.exp(log_contexts(problem, model))
     per_context = (
-        _augmented_expert_rewards(problem, model, log_aux_theta)
+        augmented_expert_rewards(problem, model, log_aux_theta)
         + b * problem.log_p
         + (b - a) * log_aux_context
     )
@@ -373,9 +352,9 @@ def lower_bound(
     w = model.weights
     return float(
         w @ expected
-        + a * w @ _expert_entropy(model)
-        + b * w @ _context_entropy(problem, model)
-        + b * _entropy(w)
+        + a * w @ expert_entropy(model)
+        + b * w @ context_entropy(problem, model)
+        + b * discrete_entropy(w)
     )
 
 
@@ -393,13 +372,13 @@ def expected_responsibility_kls(
         ``(E_pi(c),pi(theta|c)[KL(pi(o|c,theta) || aux(o|c,theta))],
         E_pi(c)[KL(pi(o|c) || aux(o|c))])`` for the responsibilities of ``model``.
     """
-    log_aux_theta, log_aux_context = _check_aux(problem, model, log_aux_theta, log_aux_context)
+    log_aux_theta, log_aux_context = check_aux(problem, model, log_aux_theta, log_aux_context)
     c_w, t_w = problem.contexts[1], problem.thetas[1]
     log_rt, log_rc = responsibilities(problem, model)
-    log_joint_c = np.log(model.weights)[:, None] + _log_contexts(problem, model)
-    pc = np.exp(_lse0(log_joint_c))
+    log_joint_c = np.log(model.weights)[:, None] + log_contexts(problem, model)
+    pc = np.exp(logsumexp0(log_joint_c))
     # pi(c) pi(theta|c) pi(o|c,theta) = pi(o) pi(c|o) pi(theta|c,o)
-    joint = np.exp(log_joint_c[:, :, None] + _log_experts(problem, model))
+    joint = np.exp(log_joint_c[:, :, None] + log_experts(problem, model))
     kl_theta = float(np.einsum("kct,kct,c,t->", joint, log_rt - log_aux_theta, c_w, t_w))
     kl_ctx = float(np.sum(c_w * pc * np.sum(np.exp(log_rc) * (log_rc - log_aux_context), 0)))
     return kl_theta, kl_ctx
@@ -408,7 +387,7 @@ def expected_responsibility_kls(
 # ------------------------------------------------------- random auxiliaries, perturbations
 
 
-def _random_aux(rng: np.random.Generator, problem: ToyProblem, k: int, scale: float):
+def random_aux(rng: np.random.Generator, problem: ToyProblem, k: int, scale: float):
     """Random auxiliary responsibilities: log-softmax of random quadratics in (c, theta)."""
     c, _ = problem.contexts
     t, _ = problem.thetas
@@ -424,7 +403,9 @@ def _random_aux(rng: np.random.Generator, problem: ToyProblem, k: int, scale: fl
     return log_softmax(logits_t, axis=0), log_softmax(logits_c, axis=0)
 
 
-def _perturb_expert(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+def perturb_expert(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+    """``model`` with expert ``o``'s gain, offset and std moved by ``t`` along direction ``d``
+    (drawn from ``rng`` when None); returns ``(model, d)``."""
     d = rng.normal(size=3) if d is None else d
     gain, offset, std = model.gain.copy(), model.offset.copy(), model.std.copy()
     gain[o] += 0.25 * t * d[0]
@@ -433,7 +414,9 @@ def _perturb_expert(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d
     return model.replace(gain=gain, offset=offset, std=std), d
 
 
-def _perturb_context(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+def perturb_context(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+    """``model`` with the mean and std of ``pi(c|o)`` moved by ``t`` along direction ``d``
+    (drawn from ``rng`` when None); returns ``(model, d)``."""
     d = rng.normal(size=2) if d is None else d
     mean, std = model.context_mean.copy(), model.context_std.copy()
     mean[o] += 0.4 * t * d[0]
@@ -441,6 +424,8 @@ def _perturb_context(model: ToyMoE, rng: np.random.Generator, o: int, t: float, 
     return model.replace(context_mean=mean, context_std=std), d
 
 
-def _perturb_weights(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+def perturb_weights(model: ToyMoE, rng: np.random.Generator, o: int, t: float, d=None):
+    """``model`` with the logits of ``pi(o)`` moved by ``t`` along direction ``d`` (drawn from
+    ``rng`` when None; ``o`` is unused, kept for a common signature); returns ``(model, d)``."""
     d = rng.normal(size=model.n_components) if d is None else d
     return model.replace(weights=softmax(np.log(model.weights) + 0.8 * t * d)), d

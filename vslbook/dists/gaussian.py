@@ -23,7 +23,7 @@ TensorLike = Tensor | np.ndarray | Sequence[float] | float
 Indices = Sequence[int] | Tensor | np.ndarray
 
 
-def _as_floats(**named: TensorLike) -> list[Tensor]:
+def as_floats(**named: TensorLike) -> list[Tensor]:
     """Convert inputs to tensors sharing one floating dtype.
 
     Tensors keep their dtype; lists, scalars and integer input become float64, numpy arrays
@@ -41,11 +41,12 @@ def _as_floats(**named: TensorLike) -> list[Tensor]:
     return [t.to(dtype) for t in tensors.values()]
 
 
-def _tolerance(dtype: torch.dtype) -> float:
+def dtype_tolerance(dtype: torch.dtype) -> float:
+    """The validation tolerance of ``dtype``: the square root of its machine epsilon."""
     return math.sqrt(torch.finfo(dtype).eps)
 
 
-def _check_mean_cov(mean: Tensor, cov: Tensor, mean_name: str, cov_name: str) -> int:
+def check_mean_cov(mean: Tensor, cov: Tensor, mean_name: str, cov_name: str) -> int:
     """Validate shapes ``(..., d)`` and ``(..., d, d)`` and return ``d``."""
     if mean.ndim < 1:
         raise ValueError(f"{mean_name} must have shape (..., d), got a scalar")
@@ -78,7 +79,7 @@ def cholesky(cov: Tensor, name: str = "cov") -> Tensor:
         raise ValueError(f"{name} must have shape (..., d, d), got {tuple(cov.shape)}")
     scale = cov.abs().amax() if cov.numel() else cov.new_tensor(0.0)
     asym = (cov - cov.mT).abs().amax() if cov.numel() else cov.new_tensor(0.0)
-    if asym > _tolerance(cov.dtype) * max(float(scale), 1.0):
+    if asym > dtype_tolerance(cov.dtype) * max(float(scale), 1.0):
         raise ValueError(f"{name} must be symmetric, but max |{name} - {name}^T| = {asym:.3g}")
     chol, info = torch.linalg.cholesky_ex(cov)
     if bool((info > 0).any()):
@@ -113,8 +114,8 @@ def gaussian_log_prob(x: TensorLike, mean: TensorLike, cov: TensorLike) -> Tenso
     Returns:
         Log densities of shape ``broadcast(x.shape[:-1], mean.shape[:-1], cov.shape[:-2])``.
     """
-    x, mean, cov = _as_floats(x=x, mean=mean, cov=cov)
-    d = _check_mean_cov(mean, cov, "mean", "cov")
+    x, mean, cov = as_floats(x=x, mean=mean, cov=cov)
+    d = check_mean_cov(mean, cov, "mean", "cov")
     if x.ndim < 1 or x.shape[-1] != d:
         raise ValueError(f"x must have shape (..., {d}) to match mean, got {tuple(x.shape)}")
     _broadcast_batch(x.shape[:-1], mean.shape[:-1], "x", "mean")
@@ -125,7 +126,7 @@ def gaussian_log_prob(x: TensorLike, mean: TensorLike, cov: TensorLike) -> Tenso
 
 def gaussian_entropy(cov: TensorLike) -> Tensor:
     """Differential entropy ``H = 1/2 log det(2 pi e cov)`` of a Gaussian, shape ``(...)``."""
-    (cov,) = _as_floats(cov=cov)
+    (cov,) = as_floats(cov=cov)
     chol = cholesky(cov)
     d = cov.shape[-1]
     return 0.5 * _logdet_from_chol(chol) + 0.5 * d * (1.0 + math.log(2 * math.pi))
@@ -142,11 +143,9 @@ def gaussian_kl(
     Returns:
         Non-negative KLs of the broadcast batch shape.
     """
-    mean_p, cov_p, mean_q, cov_q = _as_floats(
-        mean_p=mean_p, cov_p=cov_p, mean_q=mean_q, cov_q=cov_q
-    )
-    d = _check_mean_cov(mean_p, cov_p, "mean_p", "cov_p")
-    d_q = _check_mean_cov(mean_q, cov_q, "mean_q", "cov_q")
+    mean_p, cov_p, mean_q, cov_q = as_floats(mean_p=mean_p, cov_p=cov_p, mean_q=mean_q, cov_q=cov_q)
+    d = check_mean_cov(mean_p, cov_p, "mean_p", "cov_p")
+    d_q = check_mean_cov(mean_q, cov_q, "mean_q", "cov_q")
     if d_q != d:
         raise ValueError(f"p has dimension {d} but q has dimension {d_q}; they must agree")
     _broadcast_batch(mean_p.shape[:-1], mean_q.shape[:-1], "mean_p", "mean_q")
@@ -175,8 +174,8 @@ def _check_indices(idx: Indices, d: int, name: str) -> list[int]:
 
 def marginal_gaussian(mean: TensorLike, cov: TensorLike, idx: Indices) -> tuple[Tensor, Tensor]:
     """Marginal of the dimensions ``idx``: ``(mean[..., idx], cov[..., idx, idx])``."""
-    mean, cov = _as_floats(mean=mean, cov=cov)
-    d = _check_mean_cov(mean, cov, "mean", "cov")
+    mean, cov = as_floats(mean=mean, cov=cov)
+    d = check_mean_cov(mean, cov, "mean", "cov")
     keep = _check_indices(idx, d, "idx")
     if not keep:
         raise ValueError("idx must select at least one dimension, got an empty selection")
@@ -204,8 +203,8 @@ def condition_gaussian(
         ``(mean_u, cov_u)`` of shapes ``(..., d - k)`` and ``(..., d - k, d - k)``; the
         unobserved dimensions keep their original (ascending) order.
     """
-    mean, cov, x_obs = _as_floats(mean=mean, cov=cov, x_obs=x_obs)
-    d = _check_mean_cov(mean, cov, "mean", "cov")
+    mean, cov, x_obs = as_floats(mean=mean, cov=cov, x_obs=x_obs)
+    d = check_mean_cov(mean, cov, "mean", "cov")
     obs = _check_indices(idx_obs, d, "idx_obs")
     if not 0 < len(obs) < d:
         raise ValueError(

@@ -20,10 +20,10 @@ import torch
 from vslbook.dists.gaussian import (
     Tensor,
     TensorLike,
-    _as_floats,
-    _check_mean_cov,
-    _tolerance,
+    as_floats,
+    check_mean_cov,
     cholesky,
+    dtype_tolerance,
     gaussian_log_prob,
 )
 
@@ -37,7 +37,7 @@ def _check_mixture(x: Tensor, log_weights: Tensor, means: Tensor, covs: Tensor) 
             f"means must have shape (..., {k}, d) to match log_weights of shape "
             f"{tuple(log_weights.shape)}, got {tuple(means.shape)}"
         )
-    d = _check_mean_cov(means, covs, "means", "covs")
+    d = check_mean_cov(means, covs, "means", "covs")
     if x.ndim < 1 or x.shape[-1] != d:
         raise ValueError(f"x must have shape (..., {d}) to match means, got {tuple(x.shape)}")
     _check_log_normalised(log_weights, "log_weights")
@@ -46,7 +46,7 @@ def _check_mixture(x: Tensor, log_weights: Tensor, means: Tensor, covs: Tensor) 
 def _check_log_normalised(log_probs: Tensor, name: str) -> None:
     total = torch.logsumexp(log_probs, dim=-1)
     worst = total.abs().amax() if total.numel() else total.new_tensor(0.0)
-    tol = _tolerance(log_probs.dtype)
+    tol = dtype_tolerance(log_probs.dtype)
     if not bool(worst <= tol) or bool((log_probs > tol).any()):
         raise ValueError(
             f"{name} must be normalised log-probabilities (logsumexp over the last dimension "
@@ -61,7 +61,7 @@ def _check_probabilities(probs: Tensor, name: str) -> None:
         raise ValueError(f"{name} must be non-negative, got minimum {float(probs.min()):.3g}")
     total = probs.sum(-1)
     worst = (total - 1).abs().amax() if total.numel() else total.new_tensor(0.0)
-    if not bool(worst <= _tolerance(probs.dtype)):
+    if not bool(worst <= dtype_tolerance(probs.dtype)):
         raise ValueError(
             f"{name} must sum to 1 over the last dimension; the sums are off by up to "
             f"{float(worst):.3g}"
@@ -72,7 +72,7 @@ def component_log_probs(
     x: TensorLike, log_weights: TensorLike, means: TensorLike, covs: TensorLike
 ) -> Tensor:
     """Joint log densities ``log p(o) + log N(x | mu_o, Sigma_o)``, shape ``(..., K)``."""
-    x, log_weights, means, covs = _as_floats(x=x, log_weights=log_weights, means=means, covs=covs)
+    x, log_weights, means, covs = as_floats(x=x, log_weights=log_weights, means=means, covs=covs)
     _check_mixture(x, log_weights, means, covs)
     return log_weights + gaussian_log_prob(x.unsqueeze(-2), means, covs)
 
@@ -122,7 +122,7 @@ def categorical_entropy(probs: TensorLike) -> Tensor:
     Returns:
         Entropies in nats, shape ``(...)``.
     """
-    (probs,) = _as_floats(probs=probs)
+    (probs,) = as_floats(probs=probs)
     _check_probabilities(probs, "probs")
     return -torch.special.xlogy(probs, probs).sum(-1)
 
@@ -157,7 +157,7 @@ class LinearGaussianMoE:
         offsets: TensorLike,
         covs: TensorLike,
     ) -> None:
-        weights, context_means, context_covs, gains, offsets, covs = _as_floats(
+        weights, context_means, context_covs, gains, offsets, covs = as_floats(
             weights=weights,
             context_means=context_means,
             context_covs=context_covs,

@@ -26,14 +26,14 @@ Array = torch.Tensor | np.ndarray | float | list
 
 
 # --------------------------------------------------------------------------- input checks
-def _check_int(name: str, value: Any, minimum: int = 1) -> int:
+def check_int(name: str, value: Any, minimum: int = 1) -> int:
     """Return ``value`` as an int, or raise ValueError unless it is an integer >= ``minimum``."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < minimum:
         raise ValueError(f"{name} must be an integer >= {minimum}, got {value!r}")
     return int(value)
 
 
-def _check_positive(name: str, value: Any) -> float:
+def check_positive(name: str, value: Any) -> float:
     """Return ``value`` as a float, or raise ValueError unless it is a finite number > 0."""
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
         raise ValueError(f"{name} must be a finite positive number, got {value!r}")
@@ -42,7 +42,7 @@ def _check_positive(name: str, value: Any) -> float:
     return float(value)
 
 
-def _as_tensor(name: str, value: Array, dtype: torch.dtype | None = None) -> torch.Tensor:
+def as_float_tensor(name: str, value: Array, dtype: torch.dtype | None = None) -> torch.Tensor:
     """Convert a numpy array, list, number or tensor to a floating tensor.
 
     ``dtype=None`` keeps the dtype of a floating tensor and uses float64 otherwise.
@@ -56,7 +56,7 @@ def _as_tensor(name: str, value: Array, dtype: torch.dtype | None = None) -> tor
         raise ValueError(f"{name} must be array-like of numbers, got {value!r}") from err
 
 
-def _check_last_dim(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
+def check_last_dim(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
     """Raise ValueError unless ``value`` has shape ``(..., size)``."""
     if value.dim() < 1 or value.shape[-1] != size:
         raise ValueError(
@@ -65,7 +65,7 @@ def _check_last_dim(name: str, value: torch.Tensor, size: int, what: str) -> tor
     return value
 
 
-def _check_square(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
+def check_square(name: str, value: torch.Tensor, size: int, what: str) -> torch.Tensor:
     """Raise ValueError unless ``value`` has shape ``(..., size, size)``."""
     if value.dim() < 2 or value.shape[-2:] != (size, size):
         raise ValueError(
@@ -74,12 +74,12 @@ def _check_square(name: str, value: torch.Tensor, size: int, what: str) -> torch
     return value
 
 
-def _check_gaussian(
+def check_gaussian(
     mean: torch.Tensor, cov: torch.Tensor, size: int, what: str, names: tuple[str, str]
 ) -> tuple[torch.Tensor, torch.Tensor]:
     """Check a Gaussian ``N(mean, cov)`` over ``size`` parameters and broadcast its batch."""
-    _check_last_dim(names[0], mean, size, what)
-    _check_square(names[1], cov, size, what)
+    check_last_dim(names[0], mean, size, what)
+    check_square(names[1], cov, size, what)
     batch = torch.broadcast_shapes(mean.shape[:-1], cov.shape[:-2])
     return mean.expand(*batch, size), cov.expand(*batch, size, size)
 
@@ -95,8 +95,8 @@ def time_grid(duration: float, dt: float, dtype: torch.dtype = torch.float64) ->
 
 def time_grid_np(duration: float, dt: float) -> np.ndarray:
     """:func:`time_grid` as a float64 numpy array."""
-    duration = _check_positive("duration", duration)
-    dt = _check_positive("dt", dt)
+    duration = check_positive("duration", duration)
+    dt = check_positive("dt", dt)
     if dt > duration:
         raise ValueError(f"dt must not exceed duration={duration}, got dt={dt}")
     return np.arange(round(duration / dt) + 1, dtype=np.float64) * dt
@@ -108,16 +108,16 @@ def canonical_phase(t: Array, alpha_x: float = 3.0, tau: float = 1.0) -> torch.T
     The phase starts at ``x(0) = 1`` and decays to zero; ``tau`` is the temporal scaling
     (written gamma in the thesis).
     """
-    alpha_x = _check_positive("alpha_x", alpha_x)
-    tau = _check_positive("tau", tau)
-    t = _as_tensor("t", t)
+    alpha_x = check_positive("alpha_x", alpha_x)
+    tau = check_positive("tau", tau)
+    t = as_float_tensor("t", t)
     return torch.exp(-alpha_x * t / tau)
 
 
 # --------------------------------------------------------------------------- radial basis
 def default_width(n_basis: int) -> float:
     """Default bump width: the distance between neighbouring centres (1 for a single bump)."""
-    n_basis = _check_int("n_basis", n_basis)
+    n_basis = check_int("n_basis", n_basis)
     return 1.0 / (n_basis - 1) if n_basis > 1 else 1.0
 
 
@@ -138,7 +138,7 @@ def normalized_rbf(
     The basis is a constant of a primitive (no gradient flows through the phase): it is
     computed in float64 by :func:`normalized_rbf_np` and returned in the phase's dtype.
     """
-    phase = _as_tensor("phase", phase)
+    phase = as_float_tensor("phase", phase)
     psi = normalized_rbf_np(phase.detach().cpu().numpy(), n_basis, width, derivative=derivative)
     return torch.from_numpy(psi).to(phase.dtype)
 
@@ -158,8 +158,8 @@ def normalized_rbf_np(
     primitive per parameter vector (its duration or start time is learned), and on these small
     arrays numpy's per-call cost is a fraction of torch's.
     """
-    n_basis = _check_int("n_basis", n_basis)
-    width = default_width(n_basis) if width is None else _check_positive("width", width)
+    n_basis = check_int("n_basis", n_basis)
+    width = default_width(n_basis) if width is None else check_positive("width", width)
     phase = np.asarray(phase, dtype=np.float64)
     centers = np.linspace(0.0, 1.0, n_basis).reshape(n_basis, *[1] * phase.ndim)
     # basis index first: the softmax reduces over a short leading axis
@@ -203,9 +203,9 @@ def phase_rbf_centres(
     A single bump has bandwidth ``bandwidth_factor`` (distance 1). Returns ``(c, h)``, each
     ``(n,)``; the basis does not depend on tau or on a start delay (they only map t to x).
     """
-    n_basis = _check_int("n_basis", n_basis)
-    alpha_x = _check_positive("alpha_x", alpha_x)
-    bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+    n_basis = check_int("n_basis", n_basis)
+    alpha_x = check_positive("alpha_x", alpha_x)
+    bandwidth_factor = check_positive("bandwidth_factor", bandwidth_factor)
     if rule not in BANDWIDTH_RULES:
         raise ValueError(f"rule must be one of {BANDWIDTH_RULES}, got {rule!r}")
     if n_basis == 1:
@@ -265,7 +265,7 @@ def dmp_forcing_basis(
     ``f(x) = x phi(x)^T theta``. Computed in float64 by :func:`dmp_forcing_basis_np`,
     returned in the dtype of ``t``.
     """
-    t = _as_tensor("t", t)
+    t = as_float_tensor("t", t)
     basis = dmp_forcing_basis_np(
         t.detach().cpu().numpy(), n_basis, alpha_x, tau, bandwidth_factor, rule
     )
@@ -284,8 +284,8 @@ def dmp_forcing_basis_np(
 ) -> np.ndarray:
     """:func:`dmp_forcing_basis` in numpy, float64; ``basis_first`` puts the basis index
     first, ``(n_basis, *t.shape)``."""
-    alpha_x = _check_positive("alpha_x", alpha_x)
-    tau = _check_positive("tau", tau)
+    alpha_x = check_positive("alpha_x", alpha_x)
+    tau = check_positive("tau", tau)
     x = np.exp(-alpha_x * np.maximum(np.asarray(t, dtype=np.float64), 0.0) / tau)
     psi = phase_rbf_np(x, n_basis, alpha_x, bandwidth_factor, rule, basis_first=True)
     return x * psi if basis_first else np.moveaxis(x * psi, 0, -1)

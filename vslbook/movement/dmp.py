@@ -21,10 +21,10 @@ import torch
 
 from vslbook.movement.basis import (
     Array,
-    _as_tensor,
-    _check_int,
-    _check_last_dim,
-    _check_positive,
+    as_float_tensor,
+    check_int,
+    check_last_dim,
+    check_positive,
     dmp_forcing_basis,
     time_grid,
 )
@@ -65,17 +65,17 @@ class DMP:
         rule: str = "di-skill",
         dtype: torch.dtype = torch.float64,
     ) -> None:
-        self.n_basis = _check_int("n_basis", n_basis)
-        self.n_dof = _check_int("n_dof", n_dof)
-        self.duration = _check_positive("duration", duration)
-        self.dt = _check_positive("dt", dt)
-        self.alpha = _check_positive("alpha", alpha)
-        self.beta = self.alpha / 4.0 if beta is None else _check_positive("beta", beta)
-        self.tau = _check_positive("tau", tau)
-        self.alpha_x = _check_positive("alpha_x", alpha_x)
-        self.bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+        self.n_basis = check_int("n_basis", n_basis)
+        self.n_dof = check_int("n_dof", n_dof)
+        self.duration = check_positive("duration", duration)
+        self.dt = check_positive("dt", dt)
+        self.alpha = check_positive("alpha", alpha)
+        self.beta = self.alpha / 4.0 if beta is None else check_positive("beta", beta)
+        self.tau = check_positive("tau", tau)
+        self.alpha_x = check_positive("alpha_x", alpha_x)
+        self.bandwidth_factor = check_positive("bandwidth_factor", bandwidth_factor)
         self.rule = rule
-        self.substeps = _check_int("substeps", substeps)
+        self.substeps = check_int("substeps", substeps)
         self.dtype = dtype
         self.n_params = self.n_dof * self.n_basis
         self.times = time_grid(self.duration, self.dt, dtype=dtype)
@@ -88,7 +88,9 @@ class DMP:
 
     def forcing(self, w: Array) -> torch.Tensor:
         """Forcing ``f = x phi(x)^T theta`` (Eq. 2.45) on :attr:`times`, ``(..., T, n_dof)``."""
-        w = _check_last_dim("w", _as_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis")
+        w = check_last_dim(
+            "w", as_float_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis"
+        )
         w = w.reshape(*w.shape[:-1], self.n_dof, self.n_basis)
         basis = dmp_forcing_basis(
             self.times, self.n_basis, self.alpha_x, self.tau, self.bandwidth_factor, self.rule
@@ -113,10 +115,12 @@ class DMP:
             ``(positions, velocities)``, each ``(..., T, n_dof)`` with all batch shapes
             broadcast together; index 0 holds ``(y0, dy0)``.
         """
-        w = _check_last_dim("w", _as_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis")
-        y = _check_last_dim("y0", _as_tensor("y0", y0, self.dtype), self.n_dof, "n_dof")
-        v = _check_last_dim("dy0", _as_tensor("dy0", dy0, self.dtype), self.n_dof, "n_dof")
-        g = _check_last_dim("goal", _as_tensor("goal", goal, self.dtype), self.n_dof, "n_dof")
+        w = check_last_dim(
+            "w", as_float_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis"
+        )
+        y = check_last_dim("y0", as_float_tensor("y0", y0, self.dtype), self.n_dof, "n_dof")
+        v = check_last_dim("dy0", as_float_tensor("dy0", dy0, self.dtype), self.n_dof, "n_dof")
+        g = check_last_dim("goal", as_float_tensor("goal", goal, self.dtype), self.n_dof, "n_dof")
         batch = torch.broadcast_shapes(w.shape[:-1], y.shape[:-1], v.shape[:-1], g.shape[:-1])
         y, v = y.expand(*batch, self.n_dof), v.expand(*batch, self.n_dof)
 

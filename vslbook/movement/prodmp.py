@@ -32,11 +32,11 @@ import torch
 
 from vslbook.movement.basis import (
     Array,
-    _as_tensor,
-    _check_gaussian,
-    _check_int,
-    _check_last_dim,
-    _check_positive,
+    as_float_tensor,
+    check_gaussian,
+    check_int,
+    check_last_dim,
+    check_positive,
     time_grid_np,
 )
 from vslbook.movement.prodmp_basis import initial_value_maps, prodmp_basis
@@ -101,19 +101,19 @@ class ProDMP:
         relative_goal: bool = False,
         dtype: torch.dtype = torch.float64,
     ) -> None:
-        self.n_basis = _check_int("n_basis", n_basis)
-        self.n_dof = _check_int("n_dof", n_dof)
-        self.duration = _check_positive("duration", duration)
-        self.dt = _check_positive("dt", dt)
-        self.alpha = _check_positive("alpha", alpha)
+        self.n_basis = check_int("n_basis", n_basis)
+        self.n_dof = check_int("n_dof", n_dof)
+        self.duration = check_positive("duration", duration)
+        self.dt = check_positive("dt", dt)
+        self.alpha = check_positive("alpha", alpha)
         self.beta = self.alpha / 4.0
-        self.tau = _check_positive("tau", tau)
-        self.alpha_x = _check_positive("alpha_x", alpha_x)
-        self.bandwidth_factor = _check_positive("bandwidth_factor", bandwidth_factor)
+        self.tau = check_positive("tau", tau)
+        self.alpha_x = check_positive("alpha_x", alpha_x)
+        self.bandwidth_factor = check_positive("bandwidth_factor", bandwidth_factor)
         if not (isinstance(delay, (int, float, np.floating)) and 0 <= delay < float("inf")):
             raise ValueError(f"delay must be a finite number >= 0, got {delay!r}")
         self.delay = float(delay)
-        self.basis_tau = self.tau if basis_tau is None else _check_positive("basis_tau", basis_tau)
+        self.basis_tau = self.tau if basis_tau is None else check_positive("basis_tau", basis_tau)
         self.relative_goal = bool(relative_goal)
         self.dtype = dtype
         self.n_params = self.n_dof * (self.n_basis + 1)
@@ -154,13 +154,13 @@ class ProDMP:
         return (self._dphi if derivative else self._phi).clone()
 
     def _check_state(self, y0: Array, dy0: Array) -> tuple[torch.Tensor, torch.Tensor]:
-        y0 = _check_last_dim("y0", _as_tensor("y0", y0, self.dtype), self.n_dof, "n_dof")
-        dy0 = _check_last_dim("dy0", _as_tensor("dy0", dy0, self.dtype), self.n_dof, "n_dof")
+        y0 = check_last_dim("y0", as_float_tensor("y0", y0, self.dtype), self.n_dof, "n_dof")
+        dy0 = check_last_dim("dy0", as_float_tensor("dy0", dy0, self.dtype), self.n_dof, "n_dof")
         return y0, dy0
 
     def _params(self, params: Array, name: str = "params") -> torch.Tensor:
-        params = _as_tensor(name, params, self.dtype)
-        return _check_last_dim(name, params, self.n_params, "n_dof * (n_basis + 1)")
+        params = as_float_tensor(name, params, self.dtype)
+        return check_last_dim(name, params, self.n_params, "n_dof * (n_basis + 1)")
 
     def trajectory(self, params: Array, y0: Array, dy0: Array) -> tuple[torch.Tensor, torch.Tensor]:
         """Positions and velocities for parameters ``(..., n_dof * (n_basis + 1))``.
@@ -215,9 +215,9 @@ class ProDMP:
             ``(mean, std)``, each ``(..., T, n_dof)``; the std is zero at ``t0``.
         """
         mean = self._params(mean_params, "mean_params")
-        cov = _as_tensor("cov_params", cov_params, self.dtype)
+        cov = as_float_tensor("cov_params", cov_params, self.dtype)
         what, names = "n_dof * (n_basis + 1)", ("mean_params", "cov_params")
-        mean, cov = _check_gaussian(mean, cov, self.n_params, what, names)
+        mean, cov = check_gaussian(mean, cov, self.n_params, what, names)
         mean_pos, _ = self.trajectory(mean, y0, dy0)
         n = self.n_basis + 1
         blocks = cov.reshape(*cov.shape[:-2], self.n_dof, n, self.n_dof, n)

@@ -41,8 +41,8 @@ from functools import lru_cache
 import numpy as np
 
 from vslbook.movement.basis import (
-    _check_int,
-    _check_positive,
+    check_int,
+    check_positive,
     dmp_forcing_basis_np,
 )
 
@@ -123,11 +123,11 @@ def prodmp_basis(
 
     Cached: tasks share one grid per setting; the returned arrays are read-only.
     """
-    n_basis = _check_int("n_basis", n_basis)
-    alpha = _check_positive("alpha", alpha)
-    basis_tau = _check_positive("basis_tau", basis_tau)
-    basis_dt = _check_positive("basis_dt", basis_dt)
-    length_factor = _check_int("length_factor", length_factor)
+    n_basis = check_int("n_basis", n_basis)
+    alpha = check_positive("alpha", alpha)
+    basis_tau = check_positive("basis_tau", basis_tau)
+    basis_dt = check_positive("basis_dt", basis_dt)
+    length_factor = check_int("length_factor", length_factor)
     scaled_dt = basis_dt / basis_tau
     steps = round(1.0 / scaled_dt)
     if steps < 1:

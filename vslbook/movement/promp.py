@@ -21,12 +21,12 @@ import torch
 
 from vslbook.movement.basis import (
     Array,
-    _as_tensor,
-    _check_gaussian,
-    _check_int,
-    _check_last_dim,
-    _check_positive,
-    _check_square,
+    as_float_tensor,
+    check_gaussian,
+    check_int,
+    check_last_dim,
+    check_positive,
+    check_square,
     normalized_rbf,
     normalized_rbf_np,
     time_grid_np,
@@ -55,11 +55,11 @@ class ProMP:
         *,
         dtype: torch.dtype = torch.float64,
     ) -> None:
-        self.n_basis = _check_int("n_basis", n_basis)
-        self.n_dof = _check_int("n_dof", n_dof)
-        self.duration = _check_positive("duration", duration)
-        self.dt = _check_positive("dt", dt)
-        self.width = None if width is None else _check_positive("width", width)
+        self.n_basis = check_int("n_basis", n_basis)
+        self.n_dof = check_int("n_dof", n_dof)
+        self.duration = check_positive("duration", duration)
+        self.dt = check_positive("dt", dt)
+        self.width = None if width is None else check_positive("width", width)
         self.dtype = dtype
         self.n_params = self.n_dof * self.n_basis
         t = time_grid_np(self.duration, self.dt)
@@ -84,7 +84,9 @@ class ProMP:
         return (self._dphi if derivative else self._phi).clone()
 
     def _weights(self, w: Array) -> torch.Tensor:
-        w = _check_last_dim("w", _as_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis")
+        w = check_last_dim(
+            "w", as_float_tensor("w", w, self.dtype), self.n_params, "n_dof * n_basis"
+        )
         return w.reshape(*w.shape[:-1], self.n_dof, self.n_basis)
 
     def trajectory(self, w: Array) -> torch.Tensor:
@@ -122,9 +124,9 @@ class ProMP:
         return block.reshape(phi.shape[0] * self.n_dof, self.n_params)
 
     def _gaussian(self, mean_w: Array, cov_w: Array) -> tuple[torch.Tensor, torch.Tensor]:
-        mean_w = _as_tensor("mean_w", mean_w, self.dtype)
-        cov_w = _as_tensor("cov_w", cov_w, self.dtype)
-        return _check_gaussian(mean_w, cov_w, self.n_params, "n_dof * n_basis", ("mean_w", "cov_w"))
+        mean_w = as_float_tensor("mean_w", mean_w, self.dtype)
+        cov_w = as_float_tensor("cov_w", cov_w, self.dtype)
+        return check_gaussian(mean_w, cov_w, self.n_params, "n_dof * n_basis", ("mean_w", "cov_w"))
 
     def distribution(self, mean_w: Array, cov_w: Array) -> tuple[torch.Tensor, torch.Tensor]:
         """Trajectory distribution for weights ``theta ~ N(mean_w, cov_w)`` (Eq. 2.46 is linear).
@@ -148,8 +150,8 @@ class ProMP:
         Only the diagonal blocks of ``cov_w`` (the within-dof covariances) enter, so this costs
         ``O(T n_dof n_basis^2)`` instead of forming the full trajectory covariance.
         """
-        cov_w = _as_tensor("cov_w", cov_w, self.dtype)
-        _check_square("cov_w", cov_w, self.n_params, "n_dof * n_basis")
+        cov_w = as_float_tensor("cov_w", cov_w, self.dtype)
+        check_square("cov_w", cov_w, self.n_params, "n_dof * n_basis")
         blocks = cov_w.reshape(*cov_w.shape[:-2], self.n_dof, self.n_basis, self.n_dof, -1)
         blocks = torch.diagonal(blocks, dim1=-4, dim2=-2).movedim(-1, -3)
         var = torch.einsum("ti,...dij,tj->...td", self._phi, blocks, self._phi)
@@ -186,8 +188,8 @@ class ProMP:
         real = isinstance(t, (int, float, np.integer, np.floating)) and not isinstance(t, bool)
         if not real or not 0.0 <= t <= self.duration:
             raise ValueError(f"t must be a time in [0, duration={self.duration}], got {t!r}")
-        y = _check_last_dim("y", _as_tensor("y", y, self.dtype), self.n_dof, "n_dof")
-        y_std = _as_tensor("y_std", y_std, self.dtype)
+        y = check_last_dim("y", as_float_tensor("y", y, self.dtype), self.n_dof, "n_dof")
+        y_std = as_float_tensor("y_std", y_std, self.dtype)
         if y_std.dim() > 1 or (y_std.dim() == 1 and y_std.shape[0] != self.n_dof):
             raise ValueError(
                 f"y_std must be a number or have shape ({self.n_dof},), got shape "

@@ -21,7 +21,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from vslbook.envs.robot.task import Episode, EpisodicEnv, EpisodicTask, Rollouts
+from vslbook.envs.robot.gym_env import EpisodicEnv
+from vslbook.envs.robot.task import Episode, EpisodicTask, Rollouts
 
 _R = "vslbook.envs.robot."
 

@@ -38,8 +38,9 @@ ball → torque → ``mj_step2``, so the ball takes the hand's *current* positio
 (``mj_step`` followed by pinning, as in the authors' code, lags one step).
 
 How the law is applied: MuJoCo's actuators compute its feedback part. The file's seven arm
-motors (ctrl ∈ [−1, 1] with gears) are turned in memory (:func:`use_pd_actuators`; the file
-is not changed) into actuators on their joints with gear 1, gain 1 on ctrl and the affine
+motors (ctrl ∈ [−1, 1] with gears) are turned in memory (:func:`use_pd_actuators`, in
+:mod:`vslbook.envs.robot.beer_pong_model` with the model file and the gains; the file is not
+changed) into actuators on their joints with gear 1, gain 1 on ctrl and the affine
 bias −K_p q − K_d q̇, without ctrl or force limits. ``mj_step2`` computes their force from the
 joint positions and velocities that ``mj_step1`` found for the step, and the Euler
 integrator (the file's) applies it explicitly, like any applied force. With ctrl =
@@ -90,6 +91,14 @@ import mujoco
 import numpy as np
 
 from vslbook.envs.robot.assets import load_model
+from vslbook.envs.robot.beer_pong_model import (
+    D_GAINS,
+    MODEL,
+    MODEL_PATCHES,
+    N_DOF,
+    P_GAINS,
+    use_pd_actuators,
+)
 from vslbook.envs.robot.beer_pong_reward import (
     CODE_CONTACT_GEOMS,
     CUP_BODY,
@@ -103,18 +112,12 @@ from vslbook.envs.robot.beer_pong_reward import (
 from vslbook.envs.robot.primitives import promp_trajectory
 from vslbook.envs.robot.task import Episode, EpisodicTask
 
-MODEL = "beerpong/assets/beerpong_wo_cup.xml"
-MODEL_PATCHES = (("../../meshes/wam/", "./meshes/wam/"),)
-
 DT = 0.005
 Q0 = np.array([0.0, 1.35, 0.0, 1.18, 0.0, -0.786, -1.59])
-P_GAINS = np.array([200.0, 300.0, 100.0, 100.0, 10.0, 10.0, 2.5])
-D_GAINS = 0.5 * np.array([7.0, 15.0, 5.0, 2.5, 0.3, 0.3, 0.05])
 J_MIN = np.array([-2.6, -1.985, -2.8, -0.9, -4.55, -1.5707, -2.7])
 J_MAX = np.array([2.6, 1.985, 2.8, 3.14159, 1.25, 1.5707, 2.7])
 DURATION_BOUNDS = (0.1, 1.3)
 CUP_Z = 0.840
-N_DOF = 7
 N_LEARNED = 2  # learned weights per joint
 N_ZERO = 2  # leading basis functions with weight fixed to zero
 BASIS_WIDTH = 0.1
@@ -145,51 +148,6 @@ def desired_trajectory(
     w = np.zeros((N_DOF, N_ZERO + N_LEARNED))
     w[:, N_ZERO:] = np.reshape(theta[1:], (N_DOF, N_LEARNED)) * weights_scale
     return promp_trajectory(w, n * DT, DT, Q0, width=BASIS_WIDTH)
-
-
-def use_pd_actuators(model: mujoco.MjModel) -> None:
-    """Make the model's 7 arm motors (in memory) MuJoCo's form of the PD law's feedback part.
-
-    Each becomes a ``general`` actuator on its arm joint with gear 1, gain 1 on ctrl and the
-    affine bias [0, −K_p,j, −K_d,j], no activation and no ctrl or force limits, so its force is
-    ``ctrl_j − K_p,j q_j − K_d,j q̇_j`` (q, q̇ of the step, from ``mj_step1``); with
-    ctrl = K_p q_d + K_d q̇_d that is the PD part of the control law (module docstring). Raises
-    if the model has anything else that would change that force (actuator plugins, delays,
-    activations, actuator damping or armature, joint-level actuator force limits or gravity
-    compensation, disabled actuation) or is not integrated with Euler, which treats actuator
-    forces explicitly (``implicitfast`` would take K_d implicitly).
-    """
-    m = model
-    arm = np.arange(N_DOF)
-    if (
-        m.nu != N_DOF
-        or not np.all(m.actuator_trntype == mujoco.mjtTrn.mjTRN_JOINT)
-        or not np.array_equal(m.actuator_trnid[:, 0], arm)
-        or not np.array_equal(m.jnt_dofadr[arm], arm)
-        or not np.all(m.jnt_type[arm] == mujoco.mjtJoint.mjJNT_HINGE)
-    ):
-        raise RuntimeError(f"{MODEL}: expected one motor on each arm joint 0..6 (dofs 0..6)")
-    if (
-        np.any(m.actuator_actnum) or np.any(m.actuator_delay) or np.any(m.actuator_plugin >= 0)
-        or np.any(m.actuator_damping) or np.any(m.actuator_dampingpoly)
-        or np.any(m.actuator_armature) or np.any(m.jnt_actfrclimited[arm])
-        or np.any(m.jnt_actgravcomp[arm])
-        or m.opt.disableflags & mujoco.mjtDisableBit.mjDSBL_ACTUATION
-        or m.opt.integrator != mujoco.mjtIntegrator.mjINT_EULER
-    ):  # fmt: skip
-        raise RuntimeError(f"{MODEL}: its actuators or options would change the PD law")
-    m.actuator_dyntype[:] = mujoco.mjtDyn.mjDYN_NONE
-    m.actuator_gaintype[:] = mujoco.mjtGain.mjGAIN_FIXED
-    m.actuator_gainprm[:] = 0.0
-    m.actuator_gainprm[:, 0] = 1.0
-    m.actuator_biastype[:] = mujoco.mjtBias.mjBIAS_AFFINE
-    m.actuator_biasprm[:] = 0.0
-    m.actuator_biasprm[:, 1] = -P_GAINS
-    m.actuator_biasprm[:, 2] = -D_GAINS
-    m.actuator_gear[:] = 0.0
-    m.actuator_gear[:, 0] = 1.0
-    m.actuator_ctrllimited[:] = False
-    m.actuator_forcelimited[:] = False
 
 
 class BeerPong(EpisodicTask):

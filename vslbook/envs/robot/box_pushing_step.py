@@ -66,7 +66,7 @@ from vslbook.envs.robot.box_pushing import (
     is_success,
     unstable,
 )
-from vslbook.envs.robot.task import check_action, context_from_options
+from vslbook.envs.robot.gym_env import check_action, context_from_options
 
 N_JOINTS = 7
 OBS_DIM = 2 * N_JOINTS + 3 + 4 + 2 + 4 + 2 + 1

@@ -33,6 +33,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from vslbook.envs.robot.gym_env import check_action, context_from_options
 from vslbook.envs.robot.reacher5 import (
     N_LINKS,
     N_STEPS,
@@ -42,7 +43,6 @@ from vslbook.envs.robot.reacher5 import (
     rewards_5lr,
     tip_position,
 )
-from vslbook.envs.robot.task import check_action, context_from_options
 
 #: [cos q (5), sin q (5), goal (2), q̇ (5), tip − goal (2), t / T (1)]
 OBS_DIM = 3 * N_LINKS + 2 + 2 + 1

@@ -58,6 +58,8 @@ to bat centre over all sub-steps), g = goal:
     as a landing. The code made Figs. 4.3b and 4.4c, so its rule is the default
     (``settings="code"``); ``settings="thesis"`` (or ``floor_counts_as_landing=False``)
     gives a floor contact after the hit the "no landing" term.
+    The function is :func:`~vslbook.envs.robot.table_tennis_reward.staged_reward` (in
+    :mod:`vslbook.envs.robot.table_tennis_reward`, re-exported here).
 
 Success: the returned ball lands on the table at x < 0 (opponent's side) and
 ‖landing_xy - goal‖ < 0.2.
@@ -98,6 +100,7 @@ import numpy as np
 from vslbook.envs.robot.assets import load_model
 from vslbook.envs.robot.native import MJ_STEP
 from vslbook.envs.robot.primitives import ProDMPSpec, joint_limit_excess
+from vslbook.envs.robot.table_tennis_reward import staged_reward  # noqa: F401  (re-exported)
 from vslbook.envs.robot.task import Episode, EpisodicTask
 
 MODEL = "table_tennis/assets/xml/table_tennis_env.xml"
@@ -151,37 +154,6 @@ def serve_valid(x: np.ndarray, y: np.ndarray, v_x: np.ndarray) -> np.ndarray:
     lo, hi = serve_x_interval(v_x)
     x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
     return (x >= lo) & (x <= hi) & (np.abs(y) <= TABLE_Y_HALF) & (np.asarray(v_x) >= 0)
-
-
-def staged_reward(
-    ball: np.ndarray, racket: np.ndarray, goal: np.ndarray, hit: bool, landing: np.ndarray | None
-) -> float:
-    """The staged return of the module docstring (A.3.3).
-
-    Args:
-        ball, racket: ``(T, 3)`` ball centre and bat centre at every simulated sub-step.
-        goal: ``(2,)`` desired landing point.
-        hit: whether the ball touched the bat.
-        landing: ``(≥2,)`` position of the landing that counts (None: no landing).
-    """
-    ball = np.asarray(ball, dtype=np.float64).reshape(-1, 3)
-    racket = np.asarray(racket, dtype=np.float64).reshape(-1, 3)
-    if len(ball) == 0 or ball.shape != racket.shape:
-        raise ValueError(
-            f"ball and racket must be equal (T>0, 3) arrays: {ball.shape}, {racket.shape}"
-        )
-    goal = np.asarray(goal, dtype=np.float64)[:2]
-    diff = ball - racket
-    near = 1.0 - math.tanh(float(np.min(np.einsum("ij,ij->i", diff, diff))))
-    if not hit:
-        return 0.2 * near
-    if landing is None:
-        off = ball[:, :2] - goal
-        closest = float(np.min(np.einsum("ij,ij->i", off, off)))
-        return 2.0 * near + (1.0 - math.tanh(closest))
-    land = np.asarray(landing, dtype=np.float64)[:2]
-    err = float(np.sum((land - goal) ** 2))
-    return 2.0 * near + 4.0 * (1.0 - math.tanh(err)) + float(land[0] < 0.0)
 
 
 def trajectory_penalty(theta: np.ndarray, q_d: np.ndarray) -> float:

@@ -45,7 +45,7 @@ Reward (A.3.3; only for an executed episode), d_r = min_t ‖b_t - r_t‖, g = b
     cond. 2, racket contact, no table contact: 2 (1 - tanh(d_r²)) + (1 - tanh(min_t ‖b_t,xy - g‖²))
     cond. 3, racket contact, then table:       2 (1 - tanh(d_r²)) + 4 (1 - tanh(‖b_land - g‖²))
                                                + 1[x_land < 0]
-    (:func:`vslbook.envs.robot.table_tennis.staged_reward`). An unstable simulation returns
+    (:func:`vslbook.envs.robot.table_tennis_reward.staged_reward`). An unstable simulation returns
     -25 (executed, unsuccessful), as in the Chapter 4 task.
 
 Punishments (such samples are not simulated and not counted, ``executed=False``; A.3.3)
