@@ -183,3 +183,29 @@ def test_plan_times_an_untrained_method_from_its_recorded_runs(recorded, tmp_pat
                                              if r.get("iteration_seconds") is not None]
     hours = [r.hours_left for r in plan(FIGURE, "reduced", tmp_path / "empty")]
     assert all(h > 0 and np.isfinite(h) for h in hours)
+
+
+def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path, monkeypatch,
+                                                                        capsys):  # fmt: skip
+    from vslbook.cli import main
+    from vslbook.experiments.record_results import result_rows
+
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    root = tmp_path / "runs"
+    run = next(r for r in figure_runs(FIGURE, BUDGET) if r.method == "diskill")
+    assert main(["train", FIGURE, "--budget", BUDGET, "--root", str(root), "--methods",
+                 "diskill", "--until", "1"]) == 0  # fmt: skip
+    with (root / run.name / "metrics.jsonl").open("a") as fh:  # a row after the checkpoint
+        fh.write(json.dumps({"step": 2, "test_return": 1e9}) + "\n")
+    capsys.readouterr()
+    assert main(["record", FIGURE, "--budget", BUDGET, "--root", str(root)]) == 0
+    assert "not recorded  partial  " + run.name in capsys.readouterr().out
+    assert main(["record", FIGURE, "--budget", BUDGET, "--root", str(root), "--partial"]) == 0
+    assert f"recorded      {run.name}  (probe: 1/2 step)" in capsys.readouterr().out
+    fs = figure_set(FIGURE, root=tmp_path / "empty", mode="best", methods=("diskill",))
+    probe = fs.runs["diskill"][0]
+    assert [r["step"] for r in RunDir(probe).metrics()] == [0, 1]  # up to the checkpoint
+    assert not RunDir(probe).done and fs.probes == {run.name: "1/2 step"}
+    assert "probes, still training: diskill s0 at 1/2 step" in fs.caption()
+    assert [r for r in result_rows([FIGURE]) if r["method"] == "diskill"] == []

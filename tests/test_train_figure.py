@@ -57,3 +57,33 @@ def test_dry_run_and_bad_jobs(tmp_path, capsys):
     assert main(["train", FIGURE, "--budget", BUDGET, "--jobs", "0",
                  "--root", str(tmp_path)]) == 2  # fmt: skip
     assert "jobs must be a positive integer" in capsys.readouterr().err
+
+
+def _rows(path) -> list[dict]:
+    """A run's rows without their wall times (which differ between any two runs)."""
+    import json
+
+    rows = [json.loads(line) for line in (path / "metrics.jsonl").read_text().splitlines()]
+    return [{k: v for k, v in r.items() if k != "iteration_seconds"} for r in rows]
+
+
+def test_until_probes_a_run_and_training_again_continues_it_exactly(tmp_path, capsys):
+    from vslbook.experiments.train_figure import checkpoint_step
+    from vslbook.results import RunDir
+
+    run = next(r for r in figure_runs(FIGURE, BUDGET) if r.method == "diskill")
+    assert run.length == 2
+    capsys.readouterr()
+    assert main(["train", FIGURE, "--budget", BUDGET, "--root", str(tmp_path / "probe"),
+                 "--methods", "diskill", "--until", "1"]) == 0  # fmt: skip
+    assert capsys.readouterr().out.split() == ["probed", run.name, "(at", "step", "1", "of",
+                                               "2)"]  # fmt: skip
+    probe = tmp_path / "probe" / run.name
+    assert checkpoint_step(probe) == 1 and not RunDir(probe).done
+    # probing again does nothing; training without --until finishes the run
+    assert train_figure([run], tmp_path / "probe", until=1)[0].state == "probed"
+    assert train_figure([run], tmp_path / "probe")[0].state == "done"
+    assert train_figure([run], tmp_path / "whole")[0].state == "done"
+    assert _rows(probe) == _rows(tmp_path / "whole" / run.name)
+    with pytest.raises(ValueError, match="until must be a positive number of iterations, got 0"):
+        train_figure([run], tmp_path, until=0)

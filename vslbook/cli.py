@@ -174,6 +174,9 @@ def _parser() -> argparse.ArgumentParser:
     tr.add_argument("--jobs", type=int, default=1, help="processes (one run each)")
     tr.add_argument("--dry-run", action="store_true",
                     help="print the runs it would train, in order; train nothing")  # fmt: skip
+    tr.add_argument("--until", type=int, default=None, metavar="N",
+                    help="stop each run at iteration N (a probe; training again without "
+                    "--until continues it)")  # fmt: skip
 
     rec = sub.add_parser(
         "record", help="export a figure's finished runs into data/results/FIGURE/BUDGET/",
@@ -184,6 +187,8 @@ def _parser() -> argparse.ArgumentParser:
     rec.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
     rec.add_argument("--budget", default=None)
     rec.add_argument("--root", default="runs", help="folder of run directories")
+    rec.add_argument("--partial", action="store_true",
+                     help="also record runs still training (probes), up to their checkpoint")
 
     res = sub.add_parser(
         "results", help="the recorded run sets: final IQM with a 95 %% CI per method",
@@ -327,13 +332,13 @@ def _dispatch(args: argparse.Namespace) -> int:
             for run in runs:
                 print(run.name)
             return 0
-        results = train_figure(runs, args.root, args.jobs,
+        results = train_figure(runs, args.root, args.jobs, until=args.until,
                                report=lambda line: print(line, flush=True))  # fmt: skip
-        return 0 if all(r.state == "done" for r in results) else 1
+        return 0 if all(r.state in ("done", "probed") for r in results) else 1
     if args.command == "record":
         from vslbook.experiments.record import record, record_text
 
-        print(record_text(record(args.figure, args.budget, args.root)))
+        print(record_text(record(args.figure, args.budget, args.root, partial=args.partial)))
         return 0
     if args.command == "results":
         from vslbook.experiments.record import result_rows, results_text

@@ -29,6 +29,7 @@ from __future__ import annotations
 
 import os
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -79,6 +80,8 @@ class FigureSet:
         seeds_full: method → the seeds the figure has at the ``full`` budget.
         not_drawn: recorded runs that today's declaration of the figure no longer names
             (their configuration changed since they were recorded).
+        probes: name → progress (e.g. ``900/4500 step``) of the recorded runs that were
+            still training when recorded (``vslbook record --partial``): drawn as probes.
     """
 
     figure: str
@@ -88,6 +91,7 @@ class FigureSet:
     recorded: dict[str, dict[str, Any]] = field(default_factory=dict)
     seeds_full: dict[str, int] = field(default_factory=dict)
     not_drawn: list[str] = field(default_factory=list)
+    probes: dict[str, str] = field(default_factory=dict)
 
     @property
     def smoke(self) -> bool:
@@ -98,6 +102,9 @@ class FigureSet:
     def stale(self) -> list[str]:
         """Recorded runs made by code that has changed since (and not replayed by it)."""
         return sorted(n for n, info in self.recorded.items() if info["stale"])
+
+    def _paths(self) -> dict[str, Path]:
+        return {p.name: p for paths in self.runs.values() for p in paths}
 
     def verdict(self, text: str) -> str:
         """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke."""
@@ -127,6 +134,10 @@ class FigureSet:
                          "(vslbook results --verify replays them)")  # fmt: skip
         if self.not_drawn:
             notes.append(f"{len(self.not_drawn)} recorded runs not drawn (configuration changed)")
+        if self.probes:
+            notes.append("probes, still training: " + ", ".join(
+                f"{n.split('-vslbook')[0]} s{RunDir(p).config.get('seed')} at {self.probes[n]}"
+                for n, p in self._paths().items() if n in self.probes))  # fmt: skip
         if self.smoke:
             notes.append("smoke: code path only")
         return line + ("; " + "; ".join(notes) if notes else "") + "."
@@ -175,15 +186,21 @@ def _assemble(figure: str, b: Budget, declared: list[FigureRun], root: Path,
         elif r.name in recorded:
             out.runs.setdefault(r.method, []).append(recorded[r.name])
             out.recorded[r.name] = _recorded_info(recorded[r.name])
+            if not RunDir(recorded[r.name]).done:
+                rows = RunDir(recorded[r.name]).metrics()
+                step = int(rows[-1].get(r.unit, 0) or 0) if rows else 0
+                out.probes[r.name] = f"{step}/{r.length} {r.unit}"
     out.not_drawn = sorted(set(recorded) - {r.name for r in figure_runs(figure, b)})
     return out
 
 
-def _train(figure: str, b: Budget, declared: list[FigureRun], root: Path,
-           progress: bool) -> FigureSet:  # fmt: skip
+def _train(figure: str, b: Budget, declared: list[FigureRun], root: Path, progress: bool,
+           train_set: Callable[[Budget], Any] | None = None) -> FigureSet:  # fmt: skip
     from vslbook.progress import run_set_progress
 
     out = FigureSet(figure, b.name, {})
+    if train_set is not None:  # the chapter's own way (e.g. DIME's seed axis); reused below
+        train_set(b)
     with run_set_progress(f"{figure} runs"):  # one line per set on the book's pages
         for r in declared:
             out.runs.setdefault(r.method, []).append(r.train(root, progress=progress))
@@ -200,6 +217,7 @@ def figure_set(
     envs: tuple[str, ...] | None = None,
     mode: str | None = None,
     progress: bool = False,
+    train_set: Callable[[Budget], Any] | None = None,
 ) -> FigureSet:
     """The runs ``figure`` draws, from where the mode says (see the module's docstring).
 
@@ -208,6 +226,10 @@ def figure_set(
             or ``reduced``); mode ``best`` ignores it.
         methods, envs: only these of the figure's methods / env ids.
         mode: ``best``, ``budget`` or ``retrain``; default :func:`source_mode`.
+        train_set: where runs are trained now, called first with their budget to train
+            the figure's whole set its chapter's way (DIME trains a variant's seeds on one
+            seed axis, :func:`vslbook.training.run_seeds`); each declared run is then
+            reused from ``root`` (or trained, where ``train_set`` left it out).
 
     Raises:
         ValueError: an unknown figure, method, env or mode.
@@ -226,7 +248,8 @@ def figure_set(
     for r in full:
         seeds_full[r.method] = seeds_full.get(r.method, 0) + 1
     if mode == "retrain":
-        out = _train(figure, named, _declared(figure, named, methods, envs), root, progress)
+        out = _train(figure, named, _declared(figure, named, methods, envs), root, progress,
+                     train_set)
     else:
         out = None
         for name in ([named.name] if mode == "budget" else _LARGEST_FIRST):
@@ -241,7 +264,8 @@ def figure_set(
                 out = None
         if out is None:
             b = named if mode == "budget" else BUDGETS["smoke"]
-            out = _train(figure, b, _declared(figure, b, methods, envs), root, progress)
+            out = _train(figure, b, _declared(figure, b, methods, envs), root, progress,
+                         train_set)
     out.seeds_full = seeds_full
     if out.stale:
         warnings.warn(f"{out.figure}: {len(out.stale)} recorded run(s) were made by code that "

@@ -47,10 +47,9 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
-from vslbook.budget import BUDGETS, Budget, get_budget
+from vslbook.budget import Budget, get_budget
 from vslbook.data import (
     csv_bytes,
     evals_frame,
@@ -62,7 +61,6 @@ from vslbook.data import (
 from vslbook.experiments.recorded_runs import record_checkpoints
 from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs
 from vslbook.jsonfiles import atomic_write, json_bytes
-from vslbook.provenance import code_fingerprint
 from vslbook.results import RunDir, RunDirError
 
 __all__ = [
@@ -75,8 +73,6 @@ __all__ = [
 RUNS_COLUMNS = ["run", "figure", "method", "algo", "env", "seed", "budget", "config_hash",
                 "status"]  # fmt: skip
 PROVENANCE = "provenance.json"
-#: most bootstrap resamples :func:`result_rows` draws (``full`` asks for 50 000)
-MAX_REPS = 2000
 _DESCRIPTIONS = {
     "runs.csv": "one row per recorded run: run, figure, method, algo, env, seed, budget, "
     "config_hash, status; written by vslbook record",
@@ -207,22 +203,31 @@ class RecordReport:
     kept: list[str] = field(default_factory=list)
     skipped: list[tuple[str, str, str]] = field(default_factory=list)
     in_set: set[str] = field(default_factory=set)
+    probes: dict[str, str] = field(default_factory=dict)  # name -> progress, e.g. 900/4500
 
 
-def _state(rd: RunDir, length: int, unit: str) -> tuple[str, str]:
-    """(state, detail) of a run directory; state ``ok`` means it can be recorded.
+def _state(rd: RunDir, length: int, unit: str, partial: bool = False) -> tuple[str, str]:
+    """(state, detail) of a run directory; state ``ok`` means it can be recorded
+    (``probe``: a partial run with a checkpoint, recorded up to it where ``partial``).
 
-    A finished run made by other code is replayed (:mod:`vslbook.replay`, under its lock):
-    equal first rows keep it current (today's fingerprint joins its ``env.json``), other
-    numbers make it ``stale``.
+    A run made by other code is replayed (:mod:`vslbook.replay`, under its lock): equal
+    first rows keep it current (today's fingerprint joins its ``env.json``), other numbers
+    make it ``stale``.
     """
     if not (rd.path / RunDir.CONFIG).is_file():
         return "missing", ""
     if rd.failed:
         return "failed", str((rd.failure or {}).get("message", ""))
     if not rd.done:
-        rows = rd.metrics()
-        return "partial", f"{int(rows[-1].get(unit, 0) or 0) if rows else 0}/{length} {unit}"
+        rows = _CheckpointRows(rd).metrics() if rd.checkpoint_path.is_file() else []
+        detail = f"{int(rows[-1].get(unit, 0) or 0) if rows else 0}/{length} {unit}"
+        if not partial or not rows:
+            return "partial", detail
+        if not rd.code_matches:
+            why = _replay(rd)
+            if why is not None:
+                return "stale", f"made by other code; replay: {why}"
+        return "probe", detail
     try:
         rd.check_done()
     except RunDirError:
@@ -232,6 +237,21 @@ def _state(rd: RunDir, length: int, unit: str) -> tuple[str, str]:
         if why is not None:
             return "stale", f"made by other code; replay: {why}"
     return "ok", ""
+
+
+class _CheckpointRows:
+    """A partial run's rows up to its checkpoint (those a resume keeps), as
+    :func:`vslbook.data.evals_frame` reads a run: ``name`` and ``metrics()``."""
+
+    def __init__(self, rd: RunDir) -> None:
+        import torch
+
+        self.rd, self.name = rd, rd.name
+        state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False)
+        self.lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
+
+    def metrics(self) -> list[dict[str, Any]]:
+        return self.rd.metrics()[: self.lines]
 
 
 def _replay(rd: RunDir) -> str | None:
@@ -266,15 +286,19 @@ def _wall_time(rd: RunDir, rows: list[dict[str, Any]], env: dict[str, Any]) -> t
         started = datetime.fromisoformat(env["timestamp"]).timestamp()
     except (KeyError, TypeError, ValueError):
         return math.nan, "unknown"
-    done = (rd.path / RunDir.DONE).stat().st_mtime
-    return max(0.0, round(done - started, 3)), "DONE mtime minus env.json timestamp"
+    end = rd.path / RunDir.DONE
+    if not end.is_file():
+        end = rd.checkpoint_path
+    return (max(0.0, round(end.stat().st_mtime - started, 3)),
+            f"{end.name} mtime minus env.json timestamp")  # fmt: skip
 
 
 def _provenance(rd: RunDir, run: Any, earlier: dict[str, Any] | None) -> dict[str, Any]:
     env, config = rd.env, rd.config
     rows = rd.metrics()
     wall, wall_from = _wall_time(rd, rows, env)
-    done = json.loads((rd.path / RunDir.DONE).read_text(encoding="utf-8"))
+    done_path = rd.path / RunDir.DONE
+    done = json.loads(done_path.read_text(encoding="utf-8")) if done_path.is_file() else {}
     entry = {
         "method": run.method, "algo": run.algo, "env": run.env,
         "seed": config.get("seed"), "budget": config.get("budget"), "config": config,
@@ -293,15 +317,17 @@ def _provenance(rd: RunDir, run: Any, earlier: dict[str, Any] | None) -> dict[st
     return entry
 
 
-def record(figure: str, budget: Budget | str | None = None,
-           root: str | os.PathLike[str] = "runs") -> RecordReport:  # fmt: skip
+def record(figure: str, budget: Budget | str | None = None, root: str | os.PathLike[str] = "runs",
+           *, partial: bool = False) -> RecordReport:  # fmt: skip
     """Record the finished runs of ``figure`` at ``budget`` from ``root`` into
     :func:`recorded_dir` (see the module's docstring for the files).
 
     A run is recorded when it is ``DONE``, passes ``check_done()`` and was made by the
-    running code; runs recorded earlier and not recordable from ``root`` now are kept. A
-    run unchanged since its earlier recording keeps its date, so recording twice writes
-    the same bytes. Nothing is written when no run is recordable and none was recorded.
+    running code; with ``partial``, a run still training is recorded too (a *probe*, status
+    ``incomplete``), up to its last checkpoint. Runs recorded earlier and not recordable
+    from ``root`` now are kept. A run unchanged since its earlier recording keeps its
+    date, so recording twice writes the same bytes. Nothing is written when no run is
+    recordable and none was recorded.
 
     Raises:
         ValueError: an unknown figure or budget, or ``root`` is not a folder.
@@ -319,10 +345,12 @@ def record(figure: str, budget: Budget | str | None = None,
     fresh: dict[str, tuple[RunDir, Any]] = {}
     for run in runs:
         rd = RunDir(root / run.name)
-        state, detail = _state(rd, run.length, run.unit)
-        if state == "ok":
+        state, detail = _state(rd, run.length, run.unit, partial)
+        if state in ("ok", "probe"):
             fresh[run.name] = (rd, run)
             report.recorded.append(run.name)
+            if state == "probe":
+                report.probes[run.name] = detail
         else:
             report.skipped.append((run.name, state, detail))
     kept = sorted(set(old_runs["run"]) - set(fresh))
@@ -343,8 +371,11 @@ def record(figure: str, budget: Budget | str | None = None,
     names = sorted(run_rows)
     runs_frame = pd.DataFrame([run_rows[n] for n in names], columns=RUNS_COLUMNS)
     runs_frame["seed"] = runs_frame["seed"].astype("int64")
-    parts = [evals_frame([fresh[n][0]]) if n in fresh else old_evals[old_evals["run"] == n]
-             for n in names]  # fmt: skip
+    def rows_of(rd: RunDir) -> Any:  # a probe's rows up to its checkpoint
+        return rd if rd.done else _CheckpointRows(rd)
+
+    parts = [evals_frame([rows_of(fresh[n][0])]) if n in fresh
+             else old_evals[old_evals["run"] == n] for n in names]  # fmt: skip
     evals = pd.concat(parts, ignore_index=True).astype(
         {"run": str, "step": "int64", "metric": str, "value": "float64"})  # fmt: skip
     out.mkdir(parents=True, exist_ok=True)
@@ -371,7 +402,8 @@ def record_text(report: RecordReport) -> str:
     skipped = {name: (state, detail) for name, state, detail in report.skipped}
     for name in report.needed:
         if name not in skipped:
-            lines.append(f"recorded      {name}")
+            probe = f"  (probe: {report.probes[name]})" if name in report.probes else ""
+            lines.append(f"recorded      {name}{probe}")
             continue
         state, detail = skipped[name]
         notes = [detail] if detail else []
@@ -387,85 +419,9 @@ def record_text(report: RecordReport) -> str:
     return "\n".join(lines)
 
 
-# --------------------------------------------------------------------------- results
-
-
-def entry_stale(entry: dict[str, Any]) -> bool:
-    """True when the code the run can reach now is neither the code that made it nor code
-    that replayed its first rows identically (``code_hashes_verified``, written by
-    ``vslbook run`` on resume or by ``vslbook results --verify``)."""
-    now = code_fingerprint(tuple(entry.get("code_excluded") or ()))
-    return now != entry.get("code_hash") and now not in entry.get("code_hashes_verified", ())
-
-
-def _number(value: float) -> float | None:
-    return float(value) if math.isfinite(value) else None
-
-
-def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
-    """One row per recorded (figure, method, budget), in figure, budget and method order.
-
-    Keys: ``figure``, ``method``, ``task``, ``budget``, ``seeds`` (runs with a final value),
-    ``metric`` (the one the figure plots for the method's algorithm), ``iqm``, ``ci_low``,
-    ``ci_high`` (IQM of each run's final evaluation, i.e. its last row with the metric, with
-    a 95 % stratified bootstrap over seeds: seed 0, the budget's ``bootstrap_reps`` but at
-    most :data:`MAX_REPS`; None where no run has a value) and ``stale`` (a run's recorded code
-    fingerprint differs from what the same files give now).
-    """
-    from vslbook import stats
-
-    rows = []
-    for figure in figures or list(FIGURE_MODULES):
-        for b in BUDGETS.values():
-            directory = recorded_dir(figure, b)
-            if not (directory / "runs.csv").exists():
-                continue
-            runs, evals, provenance = read_set(directory)
-            finals = evals[evals["value"].notna()].sort_values(["run", "step"], kind="stable")
-            finals = finals.groupby(["run", "metric"]).last()  # each run's last value of each
-            order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
-            methods = order + sorted(set(runs["method"]) - set(order))
-            pairs = [(m, env) for m in methods
-                     for env in dict.fromkeys(runs.loc[runs["method"] == m, "env"])]  # fmt: skip
-            for method, env in pairs:  # one row per task of the figure (Fig. 3.2 has two)
-                task = task_of_env(env)
-                mine = runs[(runs["method"] == method) & (runs["env"] == env)]
-                names = sorted(mine["run"])
-                if not names:
-                    continue
-                metric = figure_metric(figure, str(mine["algo"].iloc[0]))
-                values = np.array([finals.loc[(n, metric), "value"] for n in names
-                                   if (n, metric) in finals.index])  # fmt: skip
-                iqm = low = high = math.nan
-                if len(values):
-                    point, ci = stats.interval_estimates(
-                        {method: values[:, None]}, reps=min(b.bootstrap_reps, MAX_REPS), seed=0)
-                    iqm, low, high = point[method][0], ci[method][0, 0], ci[method][1, 0]
-                rows.append({
-                    "figure": figure, "method": method, "task": task, "budget": b.name,
-                    "seeds": len(values), "metric": metric, "iqm": _number(iqm),
-                    "ci_low": _number(low), "ci_high": _number(high),
-                    "stale": any(entry_stale(provenance.get(n, {})) for n in names),
-                })  # fmt: skip
-    return rows
-
-
-def results_text(rows: list[dict[str, Any]]) -> str:
-    """:func:`result_rows` as an aligned table (a note when nothing is recorded)."""
-    if not rows:
-        return (f"no recorded run sets in {results_dir()}; record one with "
-                "vslbook record FIGURE --budget B --root DIR")  # fmt: skip
-
-    def num(x: float | None) -> str:
-        return "-" if x is None else f"{x:.4g}"
-
-    head = ("figure", "method", "task", "budget", "seeds", "metric", "IQM [95% CI]", "stale")
-    table = [head] + [
-        (r["figure"], r["method"], r["task"], r["budget"], str(r["seeds"]), r["metric"],
-         f"{num(r['iqm'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]",
-         "stale" if r["stale"] else "")
-        for r in rows
-    ]  # fmt: skip
-    widths = [max(len(row[i]) for row in table) for i in range(len(head))]
-    return "\n".join("  ".join(c.ljust(w) for c, w in zip(row, widths, strict=True)).rstrip()
-                     for row in table)  # fmt: skip
+# the results table: vslbook.experiments.record_results (re-exported here)
+from vslbook.experiments.record_results import (  # noqa: E402
+    entry_stale,
+    result_rows,
+    results_text,
+)

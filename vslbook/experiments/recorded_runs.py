@@ -14,7 +14,8 @@ writes the runs back as read-only run directories under
     starts where the step changes or the names stop increasing); non-numeric fields are
     not recorded;
 ``DONE``
-    covering those lines, so :meth:`vslbook.results.RunDir.check_done` holds;
+    covering those lines, so :meth:`vslbook.results.RunDir.check_done` holds; a probe (a
+    run recorded while still training, ``vslbook record --partial``) gets none;
 ``checkpoint/state.pt``
     where the set records the run's final checkpoint (:func:`record_checkpoints`: the
     first seed of each method and task, the run a figure draws a trained policy of), so
@@ -120,7 +121,7 @@ def _tables_key(directory: Path) -> dict[str, str]:
 
 
 def _write_run(target: Path, entry: dict[str, Any], rows: list[dict[str, Any]],
-               recorded: dict[str, Any], checkpoint: Path | None) -> None:  # fmt: skip
+               recorded: dict[str, Any], checkpoint: Path | None, done: bool) -> None:  # fmt: skip
     """One recorded run as a run directory in ``target`` (made afresh)."""
     import torch
 
@@ -138,7 +139,8 @@ def _write_run(target: Path, entry: dict[str, Any], rows: list[dict[str, Any]],
                            map_location="cpu", weights_only=False)  # fmt: skip
         state["_metrics_lines"] = len(rows)  # the rows of this copy, not of the original
         rd.save_checkpoint({k: v for k, v in state.items() if k != "_metrics_lines"})
-    rd.mark_done({"recorded": recorded})
+    if done:
+        rd.mark_done({"recorded": recorded})
 
 
 def materialise(figure: str, budget: Budget | str | None = None,
@@ -162,7 +164,9 @@ def materialise(figure: str, budget: Budget | str | None = None,
     paths = {name: folder / name for name in runs["run"]}
     source = folder / _SOURCE
     fresh = source.is_file() and json.loads(source.read_text(encoding="utf-8")) == key
-    if fresh and all((p / RunDir.DONE).is_file() for p in paths.values()):
+    done = dict(zip(runs["run"], runs["status"] == "done", strict=True))
+    if fresh and all((p / RunDir.CONFIG).is_file() and (p / RunDir.DONE).is_file() == done[n]
+                     for n, p in paths.items()):  # fmt: skip
         return paths
     if folder.exists():
         shutil.rmtree(folder)
@@ -172,7 +176,7 @@ def materialise(figure: str, budget: Budget | str | None = None,
         checkpoint = directory / CHECKPOINTS / f"{name}.pt.gz"
         recorded = {"set": str(directory), "date": entry.get("recorded")}
         _write_run(folder / name, entry, metric_rows(part), recorded,
-                   checkpoint if checkpoint.is_file() else None)  # fmt: skip
+                   checkpoint if checkpoint.is_file() else None, bool(done[name]))  # fmt: skip
     missing = sorted(set(paths) - {p.name for p in folder.iterdir()})
     if missing:
         raise ValueError(f"recorded set {directory} lists runs with no evaluations: {missing}")

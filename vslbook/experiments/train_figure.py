@@ -10,6 +10,13 @@ reused, a partial one resumes from its checkpoint, and a run another process hol
 skipped (its lock, :mod:`vslbook.run_lock`), which lets two ``train`` commands, or a
 ``train`` and a ``sweep``, share one root. Runs are taken in the order the figure lists
 them after sorting by seed, so the first seeds of every method finish first.
+
+``until`` (``vslbook train ... --until N``) stops each run once it has trained ``N``
+iterations (its checkpoint is then at step ``N``, without ``DONE``): a *probe* of a long
+run, e.g. the first 900 of table tennis hard's 4500 iterations, to see where success
+starts. Training the same run later without ``until`` continues it from there to its full
+length, so a probe costs nothing extra. Probes are recorded with ``vslbook record
+--partial``.
 """
 
 from __future__ import annotations
@@ -24,13 +31,14 @@ from pathlib import Path
 from vslbook.budget import Budget, get_budget
 from vslbook.experiments.run_plan import FigureRun, figure_runs
 
-__all__ = ["TrainResult", "select_runs", "train_figure"]
+__all__ = ["TrainResult", "checkpoint_step", "select_runs", "train_figure"]
 
 
 @dataclass(frozen=True)
 class TrainResult:
-    """What became of one run: ``done``, ``skipped`` (another process holds it) or
-    ``failed`` (diverged, or an error; ``detail`` says which)."""
+    """What became of one run: ``done``, ``probed`` (stopped at ``until``), ``skipped``
+    (another process holds it) or ``failed`` (diverged, or an error; ``detail`` says
+    which)."""
 
     run: FigureRun
     state: str
@@ -65,19 +73,55 @@ def select_runs(figure: str, budget: Budget | str | None = None, *,
     return sorted(keep, key=lambda r: (r.seed, order[id(r)]))
 
 
-def _train_one(run: FigureRun, root: str) -> tuple[str, str]:
-    """Worker: train ``run`` in ``root`` with one thread; (state, detail)."""
+def checkpoint_step(path: str | Path) -> int:
+    """The step of the last row a run's checkpoint covers (0 without a checkpoint): where
+    the run resumes. Rows logged after the checkpoint are dropped on resume, so they do not
+    count."""
+    import json
+
     import torch
 
+    from vslbook.results import RunDir
+
+    rd = RunDir(path)
+    if not rd.checkpoint_path.is_file():
+        return 0
+    state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False)
+    lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
+    if lines <= 0:
+        return 0
+    with open(rd.metrics_path, encoding="utf-8") as fh:
+        rows = [line for _, line in zip(range(lines), fh, strict=False)]
+    return int(json.loads(rows[-1])["step"]) if rows else 0
+
+
+def _train_one(run: FigureRun, root: str, until: int | None = None) -> tuple[str, str]:
+    """Worker: train ``run`` in ``root`` with one thread (to step ``until``, where given);
+    (state, detail)."""
+    import torch
+
+    from vslbook.results import RunDir
     from vslbook.run_lock import RunLockedError
 
     torch.set_num_threads(1)
+    kwargs = {}
+    if until is not None:
+        if run.unit != "step":
+            return "skipped", f"--until counts iterations; {run.name} counts {run.unit}"
+        if RunDir(Path(root) / run.name).done:
+            return "done", ""
+        left = until - checkpoint_step(Path(root) / run.name)
+        if left <= 0:
+            return "probed", f"at step {until} of {run.length}"
+        kwargs["stop_after"] = left
     try:
-        run.train(root)
+        rd = RunDir(run.train(root, **kwargs))
     except RunLockedError as err:
         return "skipped", str(err)
     except Exception as err:  # noqa: BLE001 -- one failed run must not stop the others
         return "failed", f"{type(err).__name__}: {err}"
+    if until is not None and not rd.done:
+        return "probed", f"at step {checkpoint_step(rd.path)} of {run.length}"
     return "done", ""
 
 
@@ -87,11 +131,14 @@ def _one_thread_env() -> None:
 
 
 def train_figure(runs: list[FigureRun], root: str | Path = "runs", jobs: int = 1,
-                 report=print) -> list[TrainResult]:  # fmt: skip
+                 report=print, *, until: int | None = None) -> list[TrainResult]:  # fmt: skip
     """Train ``runs`` in ``root`` with ``jobs`` processes (see the module's docstring);
-    ``report(line)`` is called as each run ends. Returns one result per run."""
+    ``report(line)`` is called as each run ends. Returns one result per run (state
+    ``probed`` for a run stopped at ``until``)."""
     if not isinstance(jobs, int) or jobs < 1:
         raise ValueError(f"jobs must be a positive integer, got {jobs!r}")
+    if until is not None and (not isinstance(until, int) or until < 1):
+        raise ValueError(f"until must be a positive number of iterations, got {until!r}")
     root = Path(root)
     if root.exists() and not root.is_dir():
         raise ValueError(f"root {str(root)!r} is not a folder; expected a folder for the "
@@ -106,7 +153,7 @@ def train_figure(runs: list[FigureRun], root: str | Path = "runs", jobs: int = 1
         while pending or running:
             while pending and len(running) < jobs:
                 run = pending.pop(0)
-                running[pool.submit(_train_one, run, str(root))] = run
+                running[pool.submit(_train_one, run, str(root), until)] = run
             finished, _ = wait(running, return_when=FIRST_COMPLETED)
             for future in finished:
                 run = running.pop(future)
