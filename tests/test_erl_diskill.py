@@ -312,3 +312,35 @@ def test_cli_bad_env_names_the_value(tmp_path):
     with pytest.raises(ValueError, match="TableTennis4D"):
         run("lindiskill", "vslbook/TableTennis4D-v0", seed=0, budget="smoke", root=tmp_path,
             progress=False)  # fmt: skip
+
+
+class HalfRejected(EpisodicTask):
+    """c ∈ [−1, 1]; θ with θ₀ > c is rejected unsimulated (−100), else R = −θ₀² − 1."""
+
+    name = "toy-half-rejected"
+    context_names = ("c",)
+    context_low = np.array([-1.0])
+    context_high = np.array([1.0])
+    n_params = 1
+    has_success: ClassVar[bool] = False
+
+    def episodes(self, theta: np.ndarray, contexts: np.ndarray) -> list[Episode]:
+        return [Episode(-100.0, executed=False) if t[0] > c[0] else Episode(-t[0] ** 2 - 1.0)
+                for t, c in zip(theta, contexts, strict=True)]  # fmt: skip
+
+
+def test_executed_return_leaves_the_rejected_penalty_out():
+    model = DiSkill(HalfRejected(), small(test_contexts=200), seed=3)
+    before = model.iteration
+    out = model.test()
+    gen = torch.Generator().manual_seed(3 * 1_000_003 + before)  # as test() draws o
+    experts = model.choose_experts(model.test_contexts, gen)
+    theta = model.mean_parameters(model.test_contexts, experts)
+    executed = theta[:, 0] <= model.test_contexts[:, 0]
+    assert 0 < executed.mean() < 1  # both kinds present: the check means something
+    assert out["test_executed"] == pytest.approx(executed.mean())
+    assert out["test_executed_return"] == pytest.approx(np.mean(-theta[executed, 0] ** 2 - 1.0))
+    assert out["test_return"] == pytest.approx(
+        np.where(executed, -theta[:, 0] ** 2 - 1.0, -100.0).mean())
+    rows = model.iterate()
+    assert rows["executed_return"] is None or rows["executed_return"] > -100.0

@@ -272,8 +272,11 @@ class DiSkill:
 
     def test(self) -> dict[str, float]:
         """Algorithm 3 on the fixed test contexts with the experts' means: mean return, success,
-        share executed, experts used, and the mean of each per-episode number of the task
-        over the episodes where it applies (``test_<key>``, e.g. the hopper's max height)."""
+        share executed, the mean return of the executed episodes alone
+        (``test_executed_return``, None when every θ was rejected: a rejected θ's penalty
+        can dominate ``test_return`` early on), experts used, and the mean of each
+        per-episode number of the task over the episodes where it applies (``test_<key>``,
+        e.g. the hopper's max height)."""
         gen = torch.Generator().manual_seed(self.seed * 1_000_003 + self.iteration)
         o = self.choose_experts(self.test_contexts, gen)
         theta = self.mean_parameters(self.test_contexts, o)
@@ -281,6 +284,7 @@ class DiSkill:
         out = {
             "test_return": float(roll.returns.mean()),
             "test_executed": float(roll.executed.mean()),
+            "test_executed_return": _mean_where(roll.returns, roll.executed),
         }
         if self.task.has_success:
             out["test_success"] = float(roll.success.mean())
@@ -301,6 +305,7 @@ class DiSkill:
         metrics = {
             "mean_return": float(b["episode_returns"].mean()),
             "rejected": float((~b["executed"]).mean()),
+            "executed_return": _mean_where(b["episode_returns"], b["executed"]),
         }
         if self.task.has_success:
             metrics["success"] = float(b["success"].mean())
@@ -398,3 +403,9 @@ def train(
         if checkpoint is not None and (due or (checkpoint_due is not None and checkpoint_due())):
             checkpoint(s)
     return s
+
+
+def _mean_where(values: Any, mask: Any) -> float | None:
+    """Mean of ``values`` where ``mask`` holds; None where it holds nowhere."""
+    values, mask = np.asarray(values, dtype=np.float64), np.asarray(mask, dtype=bool)
+    return float(values[mask].mean()) if mask.any() else None
