@@ -103,7 +103,7 @@ def retrain_estimate(budget: str, root: Path) -> str:
         lines.append(f"  {figure}: {len(todo)} runs to train, {hours:.1f} core-hours{note}")
     lines.append(f"retraining at {budget}: {total:.1f} core-hours measured"
                  + (f" plus {untimed} runs not yet timed" if untimed else "")
-                 + " (Chapter 5's runs are not in the plan)")
+                 + " (vslbook plan FIGURE lists each run)")
     return "\n".join(lines)
 
 

@@ -17,8 +17,9 @@ uses this one declaration:
   record`` check before they use it, moving a stale run to ``_stale/``), and estimates
   the core-hours left from the per-iteration times the runs in the root measured.
 
-Chapters registered here: 3 (Figs. 3.1, 3.2, 3.5, :mod:`vslbook.experiments.ch3_runs`) and
-4 (:mod:`vslbook.experiments.diskill_runs`).
+Chapters registered here: 3 (Figs. 3.1, 3.2, 3.5, :mod:`vslbook.experiments.ch3_runs`),
+4 (:mod:`vslbook.experiments.diskill_runs`) and 5 (the live DIME run sets: cheetah-run,
+the ablations, Fig. 5.7, :mod:`vslbook.experiments.ch5_runs`).
 """
 
 from __future__ import annotations
@@ -41,6 +42,8 @@ FIGURE_MODULES: dict[str, str] = {
     **{f"fig3-{n}": "vslbook.experiments.ch3_runs" for n in ("1", "2", "5")},
     **{f"fig4-{n}": "vslbook.experiments.diskill_runs"
        for n in ("3b", "3c", "4a", "4b", "4c", "4d")},
+    **dict.fromkeys(("fig5-3-cheetah", "fig5-ablations", "fig5-7"),
+                    "vslbook.experiments.ch5_runs"),
 }  # fmt: skip
 
 
