@@ -28,6 +28,7 @@ __all__ = [
     "DataIntegrityError",
     "collect_runs",
     "csv_bytes",
+    "measurements",
     "data_dir",
     "evals_frame",
     "gzip_bytes",
@@ -294,3 +295,19 @@ def paper_curves(task: str | None = None) -> pd.DataFrame:
 def paper_tasks() -> list[str]:
     """The task ids in the published DIME curves, sorted."""
     return sorted(paper_curves()["env"].unique().tolist())
+
+
+def measurements(name: str) -> pd.DataFrame:
+    """A table of ``data/measurements/`` (numbers measured outside the book, with their
+    provenance in that folder's README), verified against its registry.
+
+    Raises:
+        FileNotFoundError: no such table; the message lists the ones there are.
+    """
+    folder = data_dir() / "measurements"
+    path = folder / name
+    if not path.is_file():
+        have = sorted(p.name for p in folder.glob("*.csv")) if folder.is_dir() else []
+        raise FileNotFoundError(f"no measurements table {name!r} in {folder}; expected one of "
+                                f"{have}")  # fmt: skip
+    return load_table(name, folder)
