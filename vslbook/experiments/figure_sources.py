@@ -45,7 +45,7 @@ SOURCE_ENV = "VSLBOOK_SOURCE"
 RETRAIN_ENV = "VSLBOOK_RETRAIN"
 MODES = ("best", "budget", "retrain")
 #: what a figure says instead of a verdict when its runs are smoke runs
-SMOKE_VERDICT = "smoke: code path only (1-2 iterations; no comparison with the thesis)"
+SMOKE_VERDICT = "smoke: code path only (a few iterations or steps; not compared with the thesis)"
 _LARGEST_FIRST = ("full", "reduced", "smoke")
 
 
@@ -77,7 +77,7 @@ class FigureSet:
         trained: names of the runs that come from ``runs/`` (trained now or before).
         recorded: name → ``{"date", "git_sha", "stale"}`` of the runs read from
             ``data/results/``.
-        seeds_full: method → the seeds the figure has at the ``full`` budget.
+        seeds_full: method → the seeds the figure has at the ``full`` budget (the thesis's).
         not_drawn: recorded runs that today's declaration of the figure no longer names
             (their configuration changed since they were recorded).
         probes: name → progress (e.g. ``900/4500 step``) of the recorded runs that were
@@ -127,7 +127,7 @@ class FigureSet:
         seeds = ", ".join(f"{m} {len(p)} of {self.seeds_full.get(m, '?')}"
                           for m, p in self.runs.items())  # fmt: skip
         line = (f"Runs of {self.figure}: {origin} at the {self.budget} budget; seeds {seeds} "
-                "(of the full budget's)")  # fmt: skip
+                "(of the thesis's, the full budget's)")  # fmt: skip
         notes = []
         if self.stale:
             notes.append(f"{len(self.stale)} recorded by code that changed since "

@@ -1,0 +1,79 @@
+"""The thesis's claims checked on a figure's final scores (vslbook.experiments.reproduction)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from vslbook.experiments.figure_sources import FigureSet
+from vslbook.experiments.reproduction import (
+    CLAIMS,
+    final_scores,
+    reproduction_text,
+    verdicts,
+)
+
+
+def _run(root: Path, name: str, env: str, finals: list[float | None]) -> Path:
+    """A run directory whose rows log ``test_success`` = each of ``finals`` in turn."""
+    path = root / name
+    path.mkdir(parents=True)
+    (path / "config.json").write_text(json.dumps({"env": env, "seed": 0}))
+    rows = [{"step": i, "test_success": v} for i, v in enumerate(finals)]
+    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    return path
+
+
+BP, TT = "vslbook/BeerPong-v0", "vslbook/TableTennisCh3-v0"
+
+
+@pytest.fixture
+def beer_pong(tmp_path):
+    svsl = [_run(tmp_path, f"svsl-{i}", BP, [0.1, v]) for i, v in enumerate((0.7, 0.9, 0.85, 1.0))]
+    hireps = [_run(tmp_path, f"hireps-{i}", BP, [v, None]) for i, v in enumerate((0.7, 0.8))]
+    return FigureSet("fig3-2", "full", {"SVSL": svsl, "HiREPS": hireps})
+
+
+def test_final_scores_take_each_runs_last_value_and_the_iqm(beer_pong):
+    scores = final_scores(beer_pong.runs, "test_success", reps=200).set_index("method")
+    # IQM of four values: the mean of the middle two (0.85, 0.9); of two: their mean
+    assert scores.loc["SVSL", "iqm"] == pytest.approx(0.875)
+    assert scores.loc["HiREPS", "iqm"] == pytest.approx(0.75)
+    assert scores.loc["SVSL", "ci_low"] <= 0.875 <= scores.loc["SVSL", "ci_high"]
+    assert list(scores["runs"]) == [4, 2]
+
+
+def test_claims_met_not_met_pending_and_smoke(beer_pong, tmp_path):
+    v = verdicts("fig3-2", beer_pong, "test_success", reps=200)
+    assert list(v["status"]) == ["met", "met"] and v["seeds"][1] == {"SVSL": 4, "HiREPS": 2}
+    low = FigureSet("fig3-2", "full", {"SVSL": beer_pong.runs["SVSL"][:1]})
+    assert list(verdicts("fig3-2", low, "test_success", reps=200)["status"]) == [
+        "not met", "pending"]  # fmt: skip
+    smoke = FigureSet("fig3-2", "smoke", beer_pong.runs)
+    assert set(verdicts("fig3-2", smoke, "test_success", reps=200)["status"]) == {"smoke"}
+    # another task's runs and probes are not scored
+    tt = _run(tmp_path, "svsl-tt", TT, [0.0])
+    probe = _run(tmp_path, "svsl-probe", BP, [0.0])
+    mixed = FigureSet("fig3-2", "full", {"SVSL": [*beer_pong.runs["SVSL"], tt, probe],
+                                         "HiREPS": beer_pong.runs["HiREPS"]},
+                      probes={"svsl-probe": "10/52600 step"})  # fmt: skip
+    assert verdicts("fig3-2", mixed, "test_success", reps=200)["seeds"][0] == {"SVSL": 4}
+
+
+def test_text_puts_the_thesis_numbers_beside_ours(beer_pong):
+    text = reproduction_text("fig3-2", beer_pong, "test_success", reps=200)
+    assert "SVSL: 0.875 [" in text and "4 seed(s); the thesis's: 0.92" in text
+    assert "met: beer pong: SVSL above HiREPS" in text
+
+
+def test_every_claim_names_a_kind_it_can_check():
+    kinds = {c.kind for claims in CLAIMS.values() for c in claims}
+    assert kinds <= {"at_least", "above", "within_or_above"}
+
+
+def test_a_run_without_the_metric_is_named(tmp_path):
+    path = _run(tmp_path, "r", BP, [None])
+    with pytest.raises(ValueError, match=r"r: no 'test_success' in its metrics"):
+        final_scores({"SVSL": [path]}, "test_success")

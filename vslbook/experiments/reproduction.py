@@ -1,0 +1,164 @@
+"""The thesis's robot results as checks on a figure's runs: final scores, the thesis's
+numbers beside ours, and a verdict per claim.
+
+Each reproduced figure states its claims as :class:`Claim` values (:data:`CLAIMS`, read from
+the thesis's text: Section 3.4.2 for beer pong, Sections 4.4.2-4.4.3 for the Chapter 4
+figures); :func:`final_scores` gives each method's final IQM over seeds with its 95 %
+stratified-bootstrap CI, and :func:`verdicts` checks every claim on them:
+
+* ``met`` / ``not met``: the claim holds or fails on the final IQMs (and CIs, where the
+  claim is about a CI);
+* ``pending``: a method of the claim has no runs yet;
+* ``smoke``: the runs are smoke runs, which test the code path only.
+
+Probes (runs still training, :attr:`FigureSet.probes`) are drawn, never scored: a claim is
+about a run's end. The thesis's numbers (:data:`THESIS_NUMBERS`) are printed beside ours,
+labelled as the thesis's; the thresholds of the ``at_least`` claims are this book's reading
+of the thesis's wording (e.g. "high success rates"), and say so.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from vslbook.results import RunDir
+
+__all__ = ["CLAIMS", "THESIS_NUMBERS", "Claim", "final_scores", "reproduction_text",
+           "verdicts"]  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Claim:
+    """One claim of the thesis about a figure's final scores.
+
+    Attributes:
+        text: the claim in words, with where the thesis makes it.
+        kind: ``at_least`` (``method``'s IQM ≥ ``value``), ``above`` (``method``'s IQM above
+            ``other``'s) or ``within_or_above`` (``method``'s IQM at least ``other``'s CI's
+            lower end).
+        method, other, value: as ``kind`` uses them.
+        env: the task the claim is about where the figure has several (Fig. 3.2).
+    """
+
+    text: str
+    kind: str
+    method: str
+    other: str | None = None
+    value: float | None = None
+    env: str | None = None
+
+
+_BP = "vslbook/BeerPong-v0"
+#: figure → its claims (the book's reproduction targets)
+CLAIMS: dict[str, tuple[Claim, ...]] = {
+    "fig3-2": (
+        Claim("beer pong: SVSL succeeds on 80 % or more (thesis Fig. 3.2e: 92 %)", "at_least",
+              "SVSL", value=0.80, env=_BP),
+        Claim("beer pong: SVSL above HiREPS (thesis Fig. 3.2e/f: 92 % against 75 %)", "above",
+              "SVSL", "HiREPS", env=_BP),
+    ),
+    "fig4-3b": (
+        Claim("table tennis: Di-SkilL at 60 % success or more (thesis: 'high success rates')",
+              "at_least", "diskill", value=0.60),
+        Claim("table tennis: BBRL at 60 % success or more (thesis: 'high success rates')",
+              "at_least", "bbrl", value=0.60),
+    ),
+    "fig4-3c": (Claim("5-link reacher: Di-SkilL above BBRL (thesis Fig. 4.3c)", "above",
+                      "diskill", "bbrl"),),
+    "fig4-4a": (Claim("hopper jump: Di-SkilL within BBRL's CI or above it (thesis Fig. 4.4a: "
+                      "'on par')", "within_or_above", "diskill", "bbrl"),),
+}  # fmt: skip
+
+#: figure → method → final score the thesis's text gives (the thesis's numbers)
+THESIS_NUMBERS: dict[str, dict[str, float]] = {
+    "fig3-2": {"SVSL": 0.92, "HiREPS": 0.75},  # Section 3.4.2: success over the cup grid
+}
+
+
+def final_scores(runs: dict[str, list[Path]], metric: str, *, reps: int | None = None,
+                 skip: set[str] | frozenset[str] = frozenset()) -> pd.DataFrame:  # fmt: skip
+    """Each method's final ``metric`` (every run's last row that has it): IQM over its runs
+    with a 95 % stratified-bootstrap CI. ``skip``: run names left out (probes).
+
+    Returns one row per method with runs: method, runs, iqm, ci_low, ci_high.
+
+    Raises:
+        ValueError: a run never logged ``metric``.
+    """
+    from vslbook import stats
+
+    table = {}
+    for method, paths in runs.items():
+        last = []
+        for path in paths:
+            if Path(path).name in skip:
+                continue
+            values = [r[metric] for r in RunDir.open(path).metrics() if r.get(metric) is not None]
+            if not values:
+                raise ValueError(f"{path}: no {metric!r} in its metrics")
+            last.append(float(values[-1]))
+        if last:
+            table[method] = np.array(last)[:, None]
+    if not table:
+        return pd.DataFrame(columns=["method", "runs", "iqm", "ci_low", "ci_high"])
+    point, ci = stats.interval_estimates(table, reps=reps, seed=0)
+    return pd.DataFrame([{"method": m, "runs": len(table[m]), "iqm": float(point[m][0]),
+                          "ci_low": float(ci[m][0, 0]), "ci_high": float(ci[m][1, 0])}
+                         for m in table])  # fmt: skip
+
+
+def _check(claim: Claim, scores: pd.DataFrame) -> str:
+    row = scores.set_index("method")
+    needed = [m for m in (claim.method, claim.other) if m is not None]
+    if any(m not in row.index for m in needed):
+        return "pending"
+    mine = row.loc[claim.method, "iqm"]
+    if claim.kind == "at_least":
+        ok = mine >= claim.value
+    elif claim.kind == "above":
+        ok = mine > row.loc[claim.other, "iqm"]
+    elif claim.kind == "within_or_above":
+        ok = mine >= row.loc[claim.other, "ci_low"]
+    else:
+        raise ValueError(f"claim kind {claim.kind!r}; expected at_least, above or "
+                         "within_or_above")  # fmt: skip
+    return "met" if ok else "not met"
+
+
+def verdicts(figure: str, fs, metric: str, *, reps: int | None = None) -> pd.DataFrame:
+    """The claims of ``figure`` (:data:`CLAIMS`) checked on the runs of the
+    :class:`~vslbook.experiments.figure_sources.FigureSet` ``fs``: one row per claim with
+    its text, status (``met``, ``not met``, ``pending``, ``smoke``) and the seeds behind it.
+    """
+    rows = []
+    for claim in CLAIMS.get(figure, ()):
+        runs = fs.runs
+        if claim.env is not None:
+            runs = {m: [p for p in ps if RunDir(p).config.get("env") == claim.env]
+                    for m, ps in runs.items()}  # fmt: skip
+        scores = final_scores(runs, metric, reps=reps, skip=set(fs.probes))
+        status = "smoke" if fs.smoke else _check(claim, scores)
+        seeds = {m: int(n) for m, n in zip(scores["method"], scores["runs"], strict=True)
+                 if m in (claim.method, claim.other)}  # fmt: skip
+        rows.append({"claim": claim.text, "status": status, "seeds": seeds})
+    return pd.DataFrame(rows, columns=["claim", "status", "seeds"])
+
+
+def reproduction_text(figure: str, fs, metric: str, *, reps: int | None = None) -> str:
+    """Lines for a figure: per method ours (final IQM [95 % CI], seeds) beside the
+    thesis's number where it gives one, then each claim's verdict."""
+    scores = final_scores(fs.runs, metric, reps=reps, skip=set(fs.probes))
+    thesis = THESIS_NUMBERS.get(figure, {})
+    lines = [f"final {metric} (IQM [95 % CI] over seeds, {fs.budget} budget):"]
+    for r in scores.itertuples():
+        given = f"; the thesis's: {thesis[r.method]:.3g}" if r.method in thesis else ""
+        lines.append(f"  {r.method}: {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}], "
+                     f"{r.runs} seed(s){given}")  # fmt: skip
+    for v in verdicts(figure, fs, metric, reps=reps).itertuples():
+        status = "smoke: code path only" if v.status == "smoke" else v.status
+        lines.append(f"  {status:>22}: {v.claim}")
+    return "\n".join(lines)
