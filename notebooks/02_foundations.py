@@ -45,7 +45,14 @@ from vslbook.bounds import foundations as F
 from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.dists import LinearGaussianMoE, condition_gaussian, gaussian_kl, gaussian_log_prob
-from vslbook.plots import learning_curve, method_color, save_figure, use_style
+from vslbook.plots import (
+    PALETTE,
+    count_phrase,
+    learning_curve,
+    method_color,
+    save_figure,
+    use_style,
+)
 
 budget = get_budget()
 use_style()
@@ -226,7 +233,7 @@ vslbook.show_source(train)
 # holds only recorded run sets, `vslbook record`) and aggregated as the
 # interquartile mean with a 95 % stratified-bootstrap interval.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.data import collect_runs, load_table
 from vslbook.stats import iqm_curve
 from vslbook.training import run
@@ -244,7 +251,7 @@ for ax, metric, label in ((axes[0], "eval_return", "return of the mean policy"),
                           (axes[1], "eval_success", "success rate (final error < 5 cm)")):
     rows = evals[evals.metric == metric]
     curve = iqm_curve(rows, x="step", y="value", run="run", reps=budget.bootstrap_reps)
-    learning_curve(ax, curve, x="step", label=f"erl-pg, {len(runs)} seeds", color=method_color("ours"))
+    learning_curve(ax, curve, x="step", label=f"erl-pg, {count_phrase(len(runs), 'seed')}", method="ours")
     ax.set(xlabel="iteration", ylabel=label)
 axes[0].legend()
 fig.suptitle(f"Episode-based policy gradient on PointReach ({budget.name} budget): IQM ± 95 % CI")
@@ -462,7 +469,7 @@ assert gaps[:, 0].max() <= 1e-8
 # value towards the ordinary optimal value as $\alpha\to0$: since $0\le\alpha\mathcal H\le\alpha\log|A|$
 # per step, the two differ by at most $\alpha\log|A|/(1-\gamma)$.
 
-# %%
+# %% tags=["full-width"]
 soft = show(F.check_soft_optimal_policy(seed=0))
 d = soft.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -554,7 +561,7 @@ assert max(errors) < 1e-10
 # distributions for eight temperatures and follows the KL to $p$ as $\beta$ grows (for large
 # $\beta$ it approaches $\mathrm{Var}_p[\bar R]/(2\beta^2)$).
 
-# %%
+# %% tags=["full-width"]
 sp = show(F.check_self_paced(seed=0))
 d = sp.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -580,7 +587,7 @@ plt.show()
 # (weights, goal) plus two homogeneous solutions whose coefficients are fixed by the
 # initial position and velocity — so the boundary conditions hold *exactly*.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.figures import draw_movement_primitives
 from vslbook.movement import DMP, ProDMP, ProMP
 
@@ -665,7 +672,7 @@ assert (end[:, -1, 0] - 1).abs().max() < 1e-2
 # its gating with the ratio of scipy densities, tests $\log\pi(\theta\mid c) = \log\pi(\theta, c) - \log\pi(c)$,
 # integrates the densities on grids and compares sample means with the mixture mean.
 
-# %%
+# %% tags=["full-width"]
 moe = show(F.check_moe_gating(seed=0))
 d = moe.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -752,7 +759,7 @@ assert np.abs(resp_pkg - resp_direct).max() < 1e-10
 # The check simulates the Euler–Maruyama recursion and compares sample moments with the
 # closed-form marginals (its tolerance allows for the known discretisation bias).
 
-# %%
+# %% tags=["full-width"]
 ou = show(F.check_ou_marginals(seed=0))
 d = ou.data
 every = max(1, len(d["times"]) // 15)
@@ -762,7 +769,7 @@ axes[0].set(xlabel="t", ylabel="x_t", title="Euler–Maruyama sample paths")
 axes[1].plot(d["times"], d["exact_mean"], "-", color="k", label="exact mean")
 axes[1].plot(d["times"][::every], d["sample_mean"][::every], "o", color=method_color("ours"), label="sampled mean")
 axes[1].plot(d["times"], d["exact_var"], "--", color="k", label="exact variance")
-axes[1].plot(d["times"][::every], d["sample_var"][::every], "s", color=method_color("DIME"), label="sampled variance")
+axes[1].plot(d["times"][::every], d["sample_var"][::every], "s", color=PALETTE[1], label="sampled variance")
 axes[1].set(xlabel="t", title="marginal moments")
 axes[1].legend(fontsize=8)
 fig.tight_layout()

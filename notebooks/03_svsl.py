@@ -53,7 +53,7 @@ import vslbook
 from vslbook.bounds import show
 from vslbook.bounds import svsl as S
 from vslbook.budget import get_budget
-from vslbook.plots import method_color, save_figure, use_style
+from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
 use_style()
@@ -122,7 +122,7 @@ dec = show(S.check_objective_decomposition(seed=0))
 # The responsibilities are what couples the experts. Left: the per-expert context
 # distributions of the toy model; right: the gating $\pi(o\mid c)$ they induce by Bayes' rule.
 
-# %%
+# %% tags=["full-width"]
 d = dec.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
 for o in range(d["gating"].shape[0]):
@@ -250,7 +250,7 @@ plt.show()
 # unweighted — that version is constant in $\pi(o)$ for this term and is not what the bound
 # contains (the tests pass it as a candidate and see the report fail). We follow Eq. 3.7.
 
-# %%
+# %% tags=["full-width"]
 w_report = show(S.check_weight_bound(seed=0))
 d = w_report.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -404,28 +404,21 @@ planar_runs = run_set("fig3-1", budget, root, progress=True)  # variant -> run d
 print(f"{sum(map(len, planar_runs.values()))} runs ready in {time.perf_counter() - t0:.0f} s")
 models = {v: [P.load_model(p) for p in paths] for v, paths in planar_runs.items()}
 
-# %%
-fig, axes = plt.subplots(2, 3, figsize=(12, 8))
-for j, variant in enumerate(P.VARIANTS):
-    P.draw_solutions(axes[0, j], models[variant][0])
-    axes[0, j].set_title(f"{variant}: mean solutions (seed 0)")
-    P.draw_context_coverage(axes[1, j], models[variant][0])
-    axes[1, j].set_title("context distributions")
+# %% tags=["full-width"]
 planar_settings = settings_phrase("planar-reacher")  # read from the runs' task object
 print("settings:", planar_settings)
-fig.suptitle(
-    f"Fig. 3.1 (ours, budget {budget.name}: {counts['n_experts']} experts, seed 0 of "
+fig = P.draw_fig_3_1(
+    {v: ms[0] for v, ms in models.items()},  # seed 0 of each variant
+    title=f"Fig. 3.1 (ours, budget {budget.name}: {counts['n_experts']} experts, seed 0 of "
     f"{counts['seeds']}; thesis: 60 experts, best of 15 seeds)\n{planar_settings}",
-    fontsize=10,
 )
-fig.tight_layout()
 save_figure(fig, "fig-3-1-planar")
 plt.show()
 
 # %% [markdown]
 # Numbers behind the pictures, per run, read two ways: on 200 targets from $p(c)$ with 20
-# draws each (top row), and as the thesis reads the figure, on its six targets with 100
-# draws each (bottom row; the authors' run script draws these six, all in the middle of the
+# draws each (left column), and as the thesis reads the figure, on its six targets with 100
+# draws each (right column; the authors' run script draws these six, all in the middle of the
 # box). Per reading: the share of draws whose tip is within 0.3 of the target without a
 # collision (solved), the collision rate (validity), the number of distinct solutions among
 # the solving draws (versatility: joint angles more than 1 rad apart count as different
@@ -470,7 +463,7 @@ plt.show()
 # to 1), line 13, the reward nor the number of experts changes this (earlier measurements:
 # a larger α buys exploration, not modes; α = 1 solves 3 % of the draws).
 
-# %%
+# %% tags=["full-width"]
 readings = {  # (the targets, draws per target) of each reading
     "targets from p(c)": {},  # planar_scores' defaults: 200 targets, 20 draws each
     "the six figure targets": {"contexts": P.FIG_CONTEXTS, "n_draws": 100},  # the thesis's
@@ -485,22 +478,24 @@ scores = {
     r: {v: [P.planar_scores(m, **kw) for m in ms] for v, ms in models.items()}
     for r, kw in readings.items()
 }
-fig, axes = plt.subplots(2, 5, figsize=(18, 5.4))
+fig, axes = plt.subplots(5, 2, figsize=(11, 13))  # a row per score, a column per reading
 iqm_of: dict[str, dict[str, dict[str, float]]] = {}
-for ax_row, (reading, keys) in zip(axes, reading_keys.items(), strict=True):
+for ax_col, (reading, keys) in zip(axes.T, reading_keys.items(), strict=True):
     iqm_of[reading] = {}
-    for ax, key in zip(ax_row, keys, strict=True):
+    for ax, key in zip(ax_col, keys, strict=True):
         table = {v: np.array([[s[key]] for s in sc]) for v, sc in scores[reading].items()}
         point, ci = interval_estimates(table, reps=budget.bootstrap_reps)
-        interval_plot(ax, point, ci, xlabel=f"{key} (IQM, {counts['seeds']} seeds)")
+        interval_plot(ax, point, ci, xlabel=P.score_label(key, counts["seeds"]))
         iqm_of[reading][key] = {v: float(point[v][0]) for v in P.VARIANTS}
         for v in P.VARIANTS:
             print(f"{reading:>22} {key:>20} {v:>28}: {point[v][0]:.3f} "
                   f"[{ci[v][0, 0]:.3f}, {ci[v][1, 0]:.3f}]")  # fmt: skip
-    ax_row[0].set_title(reading, loc="left", fontsize=9)
+    ax_col[0].set_title(reading)
+for ax in axes[:, 1]:
+    ax.tick_params(labelleft=False)  # the variants are named on the left
 fig.suptitle(
     f"Fig. 3.1 scores (ours, budget {budget.name}: {counts['n_experts']} experts, "
-    f"{counts['seeds']} seeds; thesis: 60 experts, 15 seeds)\n{planar_settings}",
+    f"{count_phrase(counts['seeds'], 'seed')}; thesis: 60 experts, 15 seeds)\n{planar_settings}",
     fontsize=10,
 )
 fig.tight_layout()
@@ -542,7 +537,7 @@ for reading, keys in reading_keys.items():
 # experts, iterations, seeds and grid sizes only); at the `reduced` budget SVSL has 3
 # experts of the thesis's 70, so this section shows the machinery more than the result.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.experiments import svsl_beer_pong as BP
 
 bp_counts = BP.beer_pong_counts(budget)
@@ -552,7 +547,7 @@ bp_runs = BP.run_all(root, budget, progress=True)  # method -> run directories
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 
-fig, axes = plt.subplots(2, 3, figsize=(14, 8))
+fig, axes = plt.subplots(3, 2, figsize=(11, 13))
 BP.draw_learning_curves(axes[0, 0], BP.learning_curves(bp_runs), thesis=None)
 axes[0, 0].set_title("(a) test return")
 BP.draw_learning_curves(
@@ -560,19 +555,19 @@ BP.draw_learning_curves(
     ylabel="expected mixture entropy (IQM)", thesis=None,
 )  # fmt: skip
 axes[0, 1].set_title("Fig. A.1: expected entropy")
-BP.draw_context_coverage(axes[0, 2], bp_models["SVSL"])
-axes[0, 2].set_title("(c) SVSL context distributions (seed 0)")
-for ax, m in zip(axes[1, :2], ("SVSL", "HiREPS"), strict=True):
+BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
+axes[1, 0].set_title("(c) SVSL context distributions (seed 0)")
+for ax, m in zip(axes[2], ("SVSL", "HiREPS"), strict=True):
     grid = BP.success_grid(bp_models[m], bp_counts["grid"], n_draws=bp_counts["grid_draws"])
     BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0)")
 trajs = BP.ball_trajectories(bp_models["SVSL"], np.array([0.0, -1.7]),
                              n_draws=bp_counts["trajectory_draws"])  # fmt: skip
-BP.draw_ball_trajectories(axes[1, 2], trajs)
-axes[1, 2].set_title("(g) SVSL: ball height, cup at (0, -1.7)")
+BP.draw_ball_trajectories(axes[1, 1], trajs)
+axes[1, 1].set_title("(g) SVSL: ball height, cup at (0, -1.7)")
 fig.suptitle(
     f"Fig. 3.2 beer pong and Fig. A.1 (ours, budget {budget.name}: SVSL N = "
     f"{bp_counts['n_experts']}, K = {bp_counts['iterations_per_expert']}, "
-    f"{bp_counts['seeds']} seed(s); thesis: N = 70, K = 750, 20 seeds)\n"
+    f"{count_phrase(bp_counts['seeds'], 'seed')}; thesis: N = 70, K = 750, 20 seeds)\n"
     f"{settings_phrase('beer-pong')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
@@ -599,7 +594,7 @@ plt.show()
 # `vslbook run svsl --env vslbook/Reacher5Ch3-v0 --set reward=R` or `vslbook run ppo --env
 # vslbook/Reacher5Ch3Step-v0 --set reward=R` at the budget (`vslbook plan fig3-5`).
 
-# %%
+# %% tags=["full-width"]
 from vslbook.experiments import svsl_reacher as RE
 
 t0 = time.perf_counter()
@@ -642,7 +637,7 @@ for reward, rows in finals.groupby("reward", sort=False):
 # as the authors' code does (`make_task("table-tennis-ch3", settings="thesis")` gives
 # A.3.3's formulas); the figure's title names the settings.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.experiments import svsl_table_tennis as TT
 
 tt_counts = TT.table_tennis_counts(budget)
@@ -651,7 +646,7 @@ t0 = time.perf_counter()
 tt_runs = TT.run_all(root, budget, progress=True)
 print(f"table tennis runs ready in {time.perf_counter() - t0:.0f} s")
 tt_svsl = TT.load_model(tt_runs["SVSL"][0])
-fig, axes = plt.subplots(1, 4, figsize=(17, 4))
+fig, axes = panel_grid(4, panel=(5.5, 4.2))
 TT.draw_learning_curves(axes[0], TT.learning_curves(tt_runs), thesis=None)
 axes[0].set_title("(b) test return")
 TT.draw_entropy_curves(axes[1], TT.learning_curves(tt_runs, "expected_entropy"), thesis=None)
@@ -663,7 +658,7 @@ axes[3].set_title("(d) SVSL, incoming-ball plane (seed 0)")
 fig.suptitle(
     f"Fig. 3.2 table tennis and Fig. A.2 (ours, budget {budget.name}: SVSL N = "
     f"{tt_counts['n_experts']}, K = {tt_counts['iterations_per_expert']}, "
-    f"{tt_counts['seeds']} seed(s); thesis: N = 50, K = 800, 20 seeds)\n"
+    f"{count_phrase(tt_counts['seeds'], 'seed')}; thesis: N = 50, K = 800, 20 seeds)\n"
     f"{settings_phrase('table-tennis-ch3')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(TT.THESIS_OUTCOME[k] for k in ("curves", "coverage", "entropy")),
@@ -687,17 +682,16 @@ plt.show()
 # trained at the active budget (seed 0); with fewer experts than strikes, an expert appears
 # more than once, and the titles say whether each strike hit the ball and where it landed.
 
-# %%
+# %% tags=["full-width"]
 c33, strikes = TT.versatile_strikes(tt_svsl, n=3, seed=0)
-fig, axes = plt.subplots(1, 3, figsize=(15, 4.2))
+fig, axes = panel_grid(3, panel=(5.2, 4.4), layout="constrained")  # room for the title
 TT.draw_fig_3_3(axes, c33, strikes)
 fig.suptitle(
-    f"Fig. 3.3 (ours, budget {budget.name}, SVSL with {TT.mixture_of(tt_svsl).n_experts} "
-    f"expert(s); thesis: 50): strikes for c = {np.array2string(c33, precision=2)}\n"
-    f"{settings_phrase('table-tennis-ch3')}",
+    f"Fig. 3.3 (ours, budget {budget.name}, SVSL with "
+    f"{count_phrase(TT.mixture_of(tt_svsl).n_experts, 'expert')}; thesis: 50): strikes for "
+    f"c = {np.array2string(c33, precision=2)}\n{settings_phrase('table-tennis-ch3')}",
     fontsize=10,
 )
-fig.tight_layout()
 save_figure(fig, "fig-3-3-strikes")
 plt.show()
 assert len(strikes) == 3 and all(s["episode"].ret == s["episode"].ret for s in strikes)

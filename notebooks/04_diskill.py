@@ -66,7 +66,7 @@ import vslbook
 from vslbook.bounds import diskill as D
 from vslbook.bounds import show
 from vslbook.budget import get_budget
-from vslbook.plots import method_color, save_figure, use_style
+from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
 use_style()
@@ -179,7 +179,7 @@ print(f"budget: {budget.name}  (set VSLBOOK_BUDGET=smoke|reduced|full)")
 # $\beta\log K$. The same report also checks the identity of the next section for seven random
 # auxiliaries.
 
-# %%
+# %% tags=["full-width"]
 obj = show(D.check_curriculum_objective(seed=0))
 d = obj.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -267,7 +267,7 @@ plt.show()
 # model; its gap equals the two KL terms; its change is $1/K$ times the change of Eq. 4.4
 # (or 4.5); and $J$ improves by at least as much as the bound.
 
-# %%
+# %% tags=["full-width"]
 exp_report = show(D.check_expert_bound(seed=0))
 ctx_report = show(D.check_context_bound(seed=0))
 
@@ -281,7 +281,7 @@ def plot_path(ax, report, what):
     ax.legend(fontsize=8)
 
 
-fig, axes = plt.subplots(1, 3, figsize=(15, 3.2))
+fig, axes = panel_grid(3, panel=(5.2, 3.4))
 plot_path(axes[0], exp_report, "one expert")
 axes[0].set_title("Eq. 4.4: the bound touches J at the old model")
 plot_path(axes[1], ctx_report, "one energy φ_o")
@@ -392,7 +392,7 @@ print(
 # asserts that no drawn context lies outside the disk, and it reports how much mass a
 # Gaussian with the same mean and covariance would put outside.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.envs.robot import make_task
 
 reacher = make_task("reacher5")
@@ -638,7 +638,7 @@ assert torch.equal(p_mean[~hit_m], mean[~hit_m]) and torch.equal(p_chol[~hit_c],
 # out in numpy. Finally, central differences of $g$ are compared with
 # $\epsilon_\Sigma-C(\tilde\Sigma(\eta))$ at three values of $\eta$.
 
-# %%
+# %% tags=["full-width"]
 from scipy.optimize import minimize, minimize_scalar
 
 
@@ -1116,7 +1116,7 @@ print(
 # the disk; for one goal the experts reach along different paths. **Ours**: seed 0 of the
 # Fig. 4.3c run set below (10 experts, Table B.3), at the counts printed with it.
 
-# %%
+# %% tags=["full-width"]
 import time
 from pathlib import Path
 
@@ -1135,7 +1135,7 @@ print(f"5LR runs ready in {time.perf_counter() - t0:.0f} s")
 model = DR.load_model(runs_5lr["diskill"][0])
 grid = RF.disk_grid(41)
 goals = np.array([[0.3, 0.25], [-0.3, 0.25], [-0.25, -0.3], [0.1, -0.4]])
-fig, axes = plt.subplots(1, 3, figsize=(14, 4.4))
+fig, axes = panel_grid(3, panel=(5.2, 4.6))
 RF.draw_context_regions(axes[0], model, grid)
 RF.draw_active_experts(axes[1], model, grid)
 RF.draw_reaches(axes[2], model, goals)
@@ -1183,9 +1183,9 @@ for goal in goals:
 # thesis's ordering; at `smoke` the panels only show that the code runs (2 iterations,
 # 2 experts with 4 samples each).
 
-# %%
+# %% tags=["full-width"]
 FIGS_4 = ("4.3c", "4.4a", "4.4b", "4.4c", "4.4d")
-fig, axes = plt.subplots(1, 5, figsize=(20, 4))
+fig, axes = panel_grid(len(FIGS_4), panel=(5.5, 4.6))
 t0 = time.perf_counter()
 finals, returns, fig_runs = {}, {}, {}
 for ax, figure in zip(axes, FIGS_4, strict=True):
@@ -1199,9 +1199,10 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
     if y != "test_return":  # the return too: it moves long before the first success
         returns[figure] = DR.final_scores(figure, runs, "test_return", reps=budget.bootstrap_reps)[0]
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
-                         ylabel=y.replace("_", " ") + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
+                         ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
     c = DR.counts(task, "diskill", budget)
-    ax.set_title(f"Fig. {figure}: {task}\n{c['iterations']} it., {c['seeds']} seed(s)", fontsize=9)
+    ax.set_title(f"Fig. {figure}: {task}, {c['iterations']} iterations, "
+                 f"{count_phrase(c['seeds'], 'seed')}", fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
 save_figure(fig, "fig-4-3c-4-4-curves")
@@ -1239,9 +1240,9 @@ for figure, (scores, verdicts) in finals.items():
 # returns show how far learning got. The same runs as above; each y-axis spans the last
 # three quarters of training.
 
-# %%
+# %% tags=["full-width"]
 succ = [f for f in FIGS_4 if DR.METRIC[f] != "test_return"]
-fig, axes = plt.subplots(1, len(succ), figsize=(4.5 * len(succ), 3.6))
+fig, axes = panel_grid(len(succ), panel=(5.5, 4.0))
 for ax, figure in zip(axes, succ, strict=True):
     ret = DR.curves(fig_runs[figure], "test_return", reps=budget.bootstrap_reps)
     draw_learning_curves(ax, ret, ylabel="test return (IQM)", thesis=None)
@@ -1251,7 +1252,7 @@ for ax, figure in zip(axes, succ, strict=True):
     lo, hi = later["lo"].min(), later["hi"].max()
     pad = 0.15 * (hi - lo) + 1e-6
     ax.set_ylim(lo - pad, hi + pad)
-    ax.set_title(f"{DR.FIGURES[figure][0]}: test return (the runs of Fig. {figure})", fontsize=9)
+    ax.set_title(f"{DR.FIGURES[figure][0]}: test return (the runs of Fig. {figure})", fontsize=10)
 fig.tight_layout()
 save_figure(fig, "fig-4-4-returns")
 plt.show()
@@ -1272,18 +1273,18 @@ plt.show()
 # rejected as invalid, no hit). It was 1.6 after 450 iterations, with the ball hit, and
 # 2.1 after 600 (13 %), with returns beginning to land. The test success was still 0.
 
-# %%
+# %% tags=["full-width"]
 t0 = time.perf_counter()
 runs_tt = DR.run_set("4.3b", budget, root, progress=True)
 print(f"table tennis runs ready in {time.perf_counter() - t0:.0f} s")
-fig, axes = plt.subplots(1, 2, figsize=(11, 4))
+fig, axes = plt.subplots(1, 2, figsize=(11, 4.4))
 for ax, y in zip(axes, ("test_success", "test_return"), strict=True):
     draw_learning_curves(ax, DR.curves(runs_tt, y, reps=budget.bootstrap_reps),
-                         ylabel=y.replace("_", " ") + " (IQM)",
+                         ylabel=DR.METRIC_LABELS[y] + " (IQM)",
                          thesis=DR.THESIS_OUTCOME["4.3b"] if y == "test_success" else None)  # fmt: skip
 c = DR.counts("table-tennis-4d", "diskill", budget)
 fig.suptitle(f"Fig. 4.3b (ours, budget {budget.name}: {c['iterations']} iterations, "
-             f"{c['seeds']} seed(s); thesis: 4500 iterations)", fontsize=10)  # fmt: skip
+             f"{count_phrase(c['seeds'], 'seed')}; thesis: 4500 iterations)", fontsize=10)  # fmt: skip
 fig.tight_layout()
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
@@ -1309,12 +1310,12 @@ for v in verdicts.itertuples():
 # counts above, so at `smoke` and `reduced` this shows the machinery with barely trained
 # experts, not the thesis's skills.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.experiments import diskill_skills as SK
 
-fig, axes = plt.subplots(2, 3, figsize=(15, 7.5))
-for row, (figure, point, label) in zip(
-    axes,
+fig, axes = plt.subplots(3, 2, figsize=(11, 12.5))  # the contexts of one task in a column
+for column, (figure, point, label) in zip(
+    axes.T,
     (
         ("4.4b", "box", "Figs. 4.5 / B.2: box pushing"),
         ("4.4c", "ball", "Figs. 4.6 / B.4: table tennis hard"),
@@ -1322,9 +1323,9 @@ for row, (figure, point, label) in zip(
     strict=True,
 ):
     model_s = DR.load_model(DR.run_set(figure, budget, root, methods=("diskill",))["diskill"][0])
-    for j, (ax, c) in enumerate(zip(row, model_s.test_contexts[:3], strict=True)):
+    for j, (ax, c) in enumerate(zip(column, model_s.test_contexts[:3], strict=True)):
         shown = SK.draw_skills(ax, model_s, c, point)
-        ax.set_title(f"{label}, context {j}", fontsize=9)
+        ax.set_title(f"{label}, context {j}", fontsize=10)
         print(f"{label}, context {np.round(c, 2)}: " + ", ".join(
             f"expert {r['expert']} (π(o|c) {r['gating']:.2f}, {'executed' if r['executed'] else 'rejected'})"
             for r in shown))  # fmt: skip
@@ -1346,17 +1347,17 @@ plt.show()
 # are on par with BBRL's, BBRL jumps slightly higher; Di-SkilL trades height for the other
 # terms of the reward, such as the healthy bonus. **Ours**: the Fig. 4.4a run set above.
 
-# %%
+# %% tags=["full-width"]
 runs_hj = DR.run_set("4.4a", budget, root, progress=True)
-fig, axes = plt.subplots(1, 3, figsize=(15, 4))
+fig, axes = panel_grid(3, panel=(5.5, 4.0))
 for ax, y, label in zip(axes, ("test_return", "test_max_height", "test_goal_distance"),
                         ("(a) return", "(b) max height [m]", "(c) goal distance [m]"), strict=True):  # fmt: skip
     draw_learning_curves(ax, DR.curves(runs_hj, y, reps=budget.bootstrap_reps),
                          ylabel=label + " (IQM)")  # fmt: skip
     ax.set_title(f"Fig. B.3{label[:3]}")
 c = DR.counts("hopper-jump", "diskill", budget)
-fig.suptitle(f"Fig. B.3 (ours, budget {budget.name}: {c['iterations']} iterations, {c['seeds']} "
-             f"seed(s); thesis: 1400 iterations, 24 seeds)", fontsize=10)  # fmt: skip
+fig.suptitle(f"Fig. B.3 (ours, budget {budget.name}: {c['iterations']} iterations, "
+             f"{count_phrase(c['seeds'], 'seed')}; thesis: 1400 iterations, 24 seeds)", fontsize=10)  # fmt: skip
 fig.tight_layout()
 save_figure(fig, "fig-b-3-hopper")
 plt.show()

@@ -46,8 +46,17 @@ from vslbook.bounds import dime as D
 from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.data import paper_curves
+from vslbook.experiments.ch5_runs import chapter5_figure, figure_runs
 from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
-from vslbook.plots import learning_curve, method_color, save_figure, thesis_vs_ours, use_style
+from vslbook.plots import (
+    count_phrase,
+    learning_curve,
+    method_color,
+    panel_grid,
+    save_figure,
+    thesis_vs_ours,
+    use_style,
+)
 from vslbook.srl.dime_config import DIMEConfig, describe_differences, named_config
 from vslbook.stats import iqm_curve
 
@@ -214,10 +223,10 @@ assert rel < 0.06
 # its closed form; and Eq. 5.10 with the exact score, propagated on a grid from
 # $\mathcal N(0,1)$, whose end density approaches the target at first order in the step.
 
-# %%
+# %% tags=["full-width"]
 sm = show(D.check_score_matching(seed=0))
 d = sm.data
-fig, axes = plt.subplots(1, 3, figsize=(14, 3.4))
+fig, axes = panel_grid(3, panel=(5.2, 3.4))
 pick = slice(0, 2000)
 axes[0].plot(a_t[pick], s_c[pick], ".", ms=2, color="#bbbbbb", label="targets ∇log π⃗_{t|0}")
 axes[0].plot(grid, s_m, "k", lw=2, label="∇log π⃗_t (exact)")
@@ -408,7 +417,7 @@ assert abs(gap_samples.mean() - chain.kl[0]) < 5 * stderr(gap_samples)
 # %%
 vslbook.show_source(vslbook.srl.diffusion_policy.DiffusionPolicy.sample)
 
-# %%
+# %% tags=["full-width"]
 lb = show(D.check_entropy_lower_bound(seed=0))
 d = lb.data
 fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
@@ -894,7 +903,7 @@ assert all(np.all(q_star >= evaluate(random_kernel()) - 1e-12) for _ in range(30
 # and lowers its fixed point, since $\ell\le\mathcal H$. The second runs them with the
 # diffusion chains of Section 1 and $\ell$ itself.
 
-# %%
+# %% tags=["full-width"]
 contraction = show(D.check_soft_bellman_contraction(seed=0))
 spi = show(D.check_soft_policy_iteration(seed=0))
 d = spi.data
@@ -934,7 +943,7 @@ plt.show()
 # Eq. 5.22 can be solved at every state at once, and no neural network or stochastic
 # gradients as in DIME itself.
 
-# %%
+# %% tags=["full-width"]
 dpi = show(D.check_diffusion_policy_iteration(seed=0))
 d = dpi.data
 gap = float(d["entropy"]) - d["bound"]
@@ -1137,12 +1146,12 @@ for start in (0.01, 20.0):
 # library's diffusion policy to a double-well $Q$ for three temperatures and draw the chains
 # from the prior to the action, next to the target they approximate.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.experiments.dime_toy import fit_boltzmann
 
 iters = budget.pick(smoke=60, reduced=400, full=1000)
 fits = [fit_boltzmann(alpha, iterations=iters, seed=0) for alpha in (0.1, 1.0, 10.0)]
-fig, axes = plt.subplots(1, 3, figsize=(13, 3.6), sharey=True)
+fig, axes = panel_grid(3, panel=(5.2, 3.8), sharey=True)
 for ax, fit in zip(axes, fits, strict=True):
     traj = fit.trajectories[:, :60, 0]
     ax.plot(np.arange(traj.shape[0]), traj, color=method_color("ours"), lw=0.5, alpha=0.5)
@@ -1150,7 +1159,8 @@ for ax, fit in zip(axes, fits, strict=True):
     ax.plot(traj.shape[0] - 1 + scale * fit.target, fit.grid, color="k", lw=1.5)
     ax.set(title=f"α = {fit.alpha:g}   (KL bound {fit.kl_upper:.2f} nats)",
            xlabel="denoising step (prior → action) | target exp(Q/α)/Z", ylim=(-2.5, 2.5))
-axes[0].set_ylabel("x")
+for ax in axes[::2]:
+    ax.set_ylabel("x")
 fig.suptitle(f"Fig. 5.1, live: diffusion chains after {iters} actor updates")
 fig.tight_layout()
 save_figure(fig, f"fig5-1-alpha-{budget.name}")
@@ -1167,7 +1177,7 @@ plt.show()
 # reward terms, observations of 105 / 348 dimensions (v3: 111 / 376, always-zero contact
 # entries dropped), and no healthy reward on the final unhealthy step.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.figures import draw_fig_5_2_published, draw_fig_5_3_published
 
 fig = draw_fig_5_2_published(budget=budget)
@@ -1186,12 +1196,14 @@ plt.show()
 # run length is the thesis's 1M steps scaled by the budget (50k at `reduced`), with
 # `budget.seeds` seeds.
 
-# %%
+# %% tags=["full-width"]
 ENV = "dm_control/cheetah-run-v0"
 # total_steps is the thesis's count (1M), scaled by the budget; evaluation every 24k steps
 # at `full` (as published), every 6k at `reduced`, once at the end at `smoke`.
 assert RUN_SETS["cheetah"].env == ENV
-cheetah = RUN_SETS["cheetah"].run(budget, RUNS, TABLES / f"ch5-cheetah-{budget.name}")
+# the runs: recorded ones where data/results/ has them, else trained now
+fs_cheetah, cheetah = chapter5_figure("fig5-3-cheetah", RUNS, TABLES)
+print(fs_cheetah.caption())
 ours_curve = iqm_curve(cheetah.curve_rows().rename(columns={"step": "env_steps"}),
                        x="env_steps", y="value", run="run", reps=budget.bootstrap_reps)
 published = iqm_curve(paper_curves("dmc_cheetah_run"), reps=budget.bootstrap_reps)
@@ -1213,6 +1225,7 @@ side = pd.merge(
     ours_curve[["env_steps", "iqm", "lo", "hi", "n_runs"]], on="env_steps",
     suffixes=(" (thesis)", " (ours)"))
 print(cheetah.captions())
+print(fs_cheetah.verdict("ours beside the published curve at the published evaluation steps:"))
 display(side.round(1))
 
 # %% [markdown]
@@ -1239,11 +1252,12 @@ display(side.round(1))
 # `reduced`). With three seeds of a small network these panels show that every switch trains
 # and which way it points on this task, not the thesis's rankings.
 
-# %%
+# %% tags=["full-width"]
 # 5050 env steps at `smoke`, 8000 at `reduced`, 100k at `full`; budget.seeds seeds
 variants = RUN_SETS["ablations"].variants
 print({k: v for k, v in RUN_SETS["ablations"].common.items() if k in ("total_steps", "eval_every")})
-abl = RUN_SETS["ablations"].run(budget, RUNS, TABLES / f"ch5-ablations-{budget.name}")
+fs_abl, abl = chapter5_figure("fig5-ablations", RUNS, TABLES)
+print(fs_abl.caption())
 rows_all = abl.curve_rows()
 curves = {label: iqm_curve(rows_all[rows_all.variant == label], x="step", y="value", run="run",
                            reps=budget.bootstrap_reps) for label in variants}
@@ -1251,29 +1265,29 @@ panels = [("Fig. 5.2c–d: diffusion steps", "2 steps"), ("Fig. 5.4a–b: fixed 
           ("Fig. 5.4c–d: Gaussian policy", "Gaussian"), ("Figs. 5.5/5.6: distr. Q", "no distr. Q"),
           ("Fig. 5.8a–b: general bridges", "GB"), ("Fig. C.2: learned β", "fixed β"),
           ("Figs. 5.2–5.3: CrossQ", "CrossQ")]
-fig, axes = plt.subplots(2, 4, figsize=(15, 6.4))
+fig, axes = panel_grid(8, panel=(5.2, 3.4))
 for ax in axes.flat[1:-1]:
     ax.sharey(axes.flat[0])  # the seven return panels share one scale; β has its own
 for ax, (title, label) in zip(axes.flat, panels, strict=False):
     for name in ("DIME", label):
-        learning_curve(ax, curves[name], x="step", label=f"{name} ({abl.seeds(name)} seeds)",
-                       color=method_color(name))
+        learning_curve(ax, curves[name], x="step", method=name,
+                       label=f"{name} ({count_phrase(abl.seeds(name), 'seed')})")
     ax.axvline(5000, color="0.6", lw=0.8, ls=":")
     ax.set(title=f"stands for {title}", xlabel="env steps")
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=8, loc="lower right")
 for ax in axes.flat[:-1]:
     ax.set_ylabel("eval return (Pendulum-v1)")
 # Fig. C.2 proper: the learned β_k (the scale of the diffusion coefficient) over training
 beta = abl.evals[(abl.evals.variant == "DIME") & (abl.evals.metric == "beta_0")]
 learning_curve(axes.flat[-1], iqm_curve(beta, x="step", y="value", run="run",
                                         reps=budget.bootstrap_reps),
-               x="step", label="DIME: learned β₀", color=method_color("DIME"))
+               x="step", label="DIME: learned β₀", method="DIME")
 axes.flat[-1].set(title="Fig. C.2: learned β₀ over training", ylabel="β₀", xlabel="env steps")
-axes.flat[-1].legend(fontsize=7)
-fig.suptitle(f"Ablations on Pendulum-v1 instead of the thesis's tasks ({budget.name} budget, "
-             f"IQM ± 95 % CI over seeds; dotted: end of the 5000 exploration steps)")
-fig.text(0.01, 0.005, abl.captions(), fontsize=6.5, va="bottom")
-fig.tight_layout(rect=(0, 0.14, 1, 0.97))
+axes.flat[-1].legend(fontsize=8)
+fig.suptitle(f"Ablations on Pendulum-v1 instead of the thesis's tasks ({budget.name} budget)\n"
+             "IQM ± 95 % CI over seeds; dotted: end of the 5000 exploration steps")
+fig.tight_layout()
+fig.text(0.01, 0.0, abl.captions(), fontsize=7.5, va="top")  # under the panels
 save_figure(fig, f"ch5-ablations-pendulum-{budget.name}")
 plt.show()
 final = rows_all.sort_values("step").groupby(["variant", "run"]).value.last()
@@ -1287,16 +1301,17 @@ print(final.groupby("variant").agg(["mean", "min", "max", "count"]).round(1).to_
 # 50 times and count which goals it reaches; the value map is the thesis's sample estimate
 # $V(s)\approx\frac1{15}\sum_{i}Q(s,a_i)$, $a_i\sim\pi(\cdot\mid s)$, on a 50×50 grid.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.envs.point_mass import GOALS
 from vslbook.experiments.dime_runs import POINT_MASS_ALPHAS as alphas
 
 # the thesis's panels run from small α up to 4 and 5; one seed per α: the figure shows one
 # agent's value map and rollouts, as the thesis's does (10k env steps at `reduced`)
 pm_variants = RUN_SETS["pointmass"].variants
-pm_steps = budget.scale(RUN_SETS["pointmass"].common["total_steps"])  # at this budget
-pm = RUN_SETS["pointmass"].run(budget, RUNS, TABLES / f"ch5-pointmass-{budget.name}")
-fig, axes = plt.subplots(1, len(alphas), figsize=(5 * len(alphas), 4.2))
+fs_pm, pm = chapter5_figure("fig5-7", RUNS, TABLES)
+print(fs_pm.caption())
+pm_steps = figure_runs("fig5-7", fs_pm.budget)[0].length  # env steps of the runs drawn
+fig, axes = panel_grid(len(alphas), panel=(5.2, 4.6))
 grid = np.stack(np.meshgrid(np.linspace(-1, 1, 50), np.linspace(-1, 1, 50)), -1).reshape(-1, 2)
 summary = {}
 for ax, label in zip(axes, pm_variants, strict=True):
@@ -1324,14 +1339,19 @@ for ax, label in zip(axes, pm_variants, strict=True):
     counts = np.bincount(np.array(reached) + 1, minlength=len(GOALS) + 1)
     summary[label] = {"no goal": counts[0], **{f"goal {g}": counts[g + 1] for g in range(len(GOALS))}}
     modes = [g for g in range(len(GOALS)) if counts[g + 1]]
-    ax.set(title=f"{label}: goals reached {modes}", xlim=(-1, 1), ylim=(-1, 1))
+    ax.set(title=f"{label}: goals reached: {', '.join(map(str, modes)) or 'none'}",
+           xlim=(-1, 1), ylim=(-1, 1))
 fig.suptitle(f"Fig. 5.7, live ({budget.name} budget, {pm_steps} env steps, 1 seed per α): "
              "value estimate and 50 rollouts")
-fig.text(0.01, 0.005, pm.captions(), fontsize=7, va="bottom")
-fig.tight_layout(rect=(0, 0.1, 1, 1))
+fig.tight_layout()
+fig.text(0.01, 0.0, pm.captions(), fontsize=7.5, va="top")  # under the panels
 save_figure(fig, f"fig5-7-pointmass-{budget.name}")
 plt.show()
 display(pd.DataFrame(summary).T.rename_axis("rollouts ending at"))
+n_goals = {label: sum(v > 0 for k, v in row.items() if k != "no goal") for label, row in summary.items()}
+more = list(n_goals.values()) == sorted(n_goals.values()) and len(set(n_goals.values())) > 1
+print(fs_pm.verdict(f"thesis: the larger α, the more goals reached (Fig. 5.7a-f); ours: {n_goals} "
+                    f"({'as in the thesis' if more else 'NOT as in the thesis'})"))
 
 # %% [markdown]
 # ## 5c. Section 5.6 — general bridges
@@ -1517,11 +1537,11 @@ assert abs(cf_gb.kl - (-cf_gb.expected_q - cf_gb.bound + cf_gb.log_z)) < 1e-9  #
 # `DiffusionPolicy`, whose `entropy_bound` must equal the bridge estimator chain by chain,
 # with `general_bridges` off and on.
 
-# %%
+# %% tags=["full-width"]
 gbr = show(D.check_general_bridge(seed=0))
 gbq = show(D.check_bridge_quadrature(seed=0))
 gbd = show(D.check_dime_as_bridge(seed=0))
-fig, axes = plt.subplots(1, 3, figsize=(14, 3.4))
+fig, axes = panel_grid(3, panel=(5.2, 3.4))
 d = gbr.data
 axes[0].loglog(d["sde_steps"], d["sde_errors"][:, 0], "o-", label="forward, Eq. 5.31 vs 5.29")
 axes[0].loglog(d["sde_steps"], d["sde_errors"][:, 1], "s--", label="backward, Eq. 5.32 vs 5.30")

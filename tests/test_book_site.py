@@ -1,6 +1,6 @@
 """The book site in a real browser: build it at the smoke budget, open every page in
 headless Chromium (Debian's ``chromium``, driven by Playwright without a downloaded
-browser) and check what a reader sees.
+browser) in a 1440x900 window (:data:`site_layout.VIEWPORT`) and check what a reader sees.
 
 Per page: no raw ``$$`` or ``\\begin{`` left in the rendered text (MathJax typeset all
 math), every image loaded, no console error or uncaught exception, no request to any host
@@ -9,6 +9,11 @@ but the local server (the site works offline), every thesis-numbered equation an
 ``0%| | 0/N [...`` or a widget output: a static page cannot redraw a bar, so it stays
 frozen; :func:`vslbook.progress.frozen_bars`). One screenshot per page (plus its first
 equation and its first figure, where it has them) goes to ``build/screenshots/``.
+
+Layout (:mod:`site_layout`, measured in the same window): every output image is shown at
+``min(natural width, column width)``; every figure saved by the build
+(``<id>.layout.json`` beside it) has at most 3 panels per row, each at least 400 px wide
+as rendered; every displayed equation fits its column or scrolls horizontally.
 """
 
 from __future__ import annotations
@@ -23,7 +28,9 @@ import threading
 from pathlib import Path
 
 import pytest
+import site_layout as layout
 
+from vslbook.plots import figures_dir
 from vslbook.progress import frozen_bars
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -112,18 +119,46 @@ def test_site_has_the_chapters_and_bibliography(site: Path):
 FIGURE_PAGES = ("02_foundations.html", "03_svsl.html", "04_diskill.html", "05_dime.html")
 
 
-def test_every_page_renders_offline(site: Path, server: str, browser):
+@pytest.fixture(scope="module")
+def rendered(site: Path, server: str, browser) -> dict[str, dict]:
+    """Every page opened once: its problems, output images and displayed equations."""
     if SHOTS.exists():
         shutil.rmtree(SHOTS)
     SHOTS.mkdir(parents=True)
-    problems: list[str] = []
-    for name in _pages(site):
-        problems += _check_page(browser, f"{server}/{name}", name, server)
+    return {name: _check_page(browser, f"{server}/{name}", name, server)
+            for name in _pages(site)}
+
+
+def test_every_page_renders_offline(rendered: dict[str, dict]):
+    problems = [p for page in rendered.values() for p in page["problems"]]
     assert not problems, "\n".join(problems)
 
 
-def _check_page(browser, url: str, name: str, server: str) -> list[str]:
-    page = browser.new_page(viewport={"width": 1280, "height": 900})
+def test_output_images_fill_the_column_up_to_their_size(rendered: dict[str, dict]):
+    problems = [p for name, page in rendered.items()
+                for p in layout.image_problems(name, page["images"])]
+    assert not problems, "\n".join(problems)
+
+
+def test_figures_have_wide_enough_panels(rendered: dict[str, dict]):
+    layouts = layout.load_layouts(figures_dir(), "smoke")
+    # written while the notebooks execute: a cached build writes none
+    assert layouts, (f"no figure layouts (*.layout.json) of the smoke budget in {figures_dir()}"
+                     ": the cached notebooks ran with another $VSLBOOK_FIGURES, or before "
+                     "save_figure wrote layouts; empty build/book-cache/smoke and run again")
+    shown = [(name, img) for name, page in rendered.items() for img in page["images"]]
+    problems = layout.figure_problems(layouts, shown)
+    assert not problems, "\n".join(problems)
+
+
+def test_displayed_equations_fit_or_scroll(rendered: dict[str, dict]):
+    problems = [p for name, page in rendered.items()
+                for p in layout.equation_problems(name, page["equations"])]
+    assert not problems, "\n".join(problems)
+
+
+def _check_page(browser, url: str, name: str, server: str) -> dict:
+    page = browser.new_page(viewport=layout.VIEWPORT)
     errors: list[str] = []
     outside: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
@@ -161,6 +196,8 @@ def _check_page(browser, url: str, name: str, server: str) -> list[str]:
             problems.append(f"{name}: equation anchor #{anchor['id']} holds no typeset math")
     problems += [f"{name}: progress bar left on the page: {bar}"
                  for bar in frozen_bars(page.evaluate(_OUTPUTS), page.content())]
+    measured = {"problems": problems, "images": page.evaluate(layout.OUTPUT_IMAGES),
+                "equations": page.evaluate(layout.EQUATIONS) if has_mathjax else []}
     page.screenshot(path=str(SHOTS / f"{stem}.png"))
     equation = page.locator("mjx-container[display='true']")
     if equation.count():
@@ -171,4 +208,4 @@ def _check_page(browser, url: str, name: str, server: str) -> list[str]:
         figure.first.scroll_into_view_if_needed()
         page.screenshot(path=str(SHOTS / f"{stem}-figure.png"))
     page.close()
-    return problems
+    return measured

@@ -112,6 +112,12 @@ def test_fig_4_2_analysis(reacher_runs):
     R.draw_context_regions(axes[0], model, grid)
     R.draw_active_experts(axes[1], model, grid)
     R.draw_reaches(axes[2], model, np.array([[0.2, 0.3], [-0.3, -0.1]]))
+    # the count of active experts on a discrete scale: one colour and one tick per number
+    bar = axes[1].collections[0].colorbar
+    assert list(bar.get_ticks()) == list(range(max(int(n.max()), 1) + 1))
+    counts = axes[1].collections[0]
+    assert counts.cmap.N == len(bar.get_ticks())
+    np.testing.assert_array_equal(counts.norm.boundaries, np.arange(len(bar.get_ticks()) + 1) - 0.5)
     plt.close(fig)
     bbrl = D.load_model(reacher_runs["bbrl"][0])
     with pytest.raises(ValueError, match="BBRL"):

@@ -95,11 +95,26 @@ def test_fig_3_1_from_the_command_line(tmp_path, monkeypatch):
     assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3
     fig = figures.draw_fig_3_1("smoke", tmp_path / "runs", progress=False)
     assert len(fig.axes) == 6
+    fig.canvas.draw()  # a row per variant: its solutions and its context distributions
+    centres = [round((ax.get_position().y0 + ax.get_position().y1) / 2, 2) for ax in fig.axes]
+    assert [centres.count(c) for c in centres] == [2] * 6
+    assert [ax.get_title() for ax in fig.axes[::2]] == [
+        f"{v}: mean solutions at the six targets" for v in P.VARIANTS
+    ]
     assert "2 experts, K = 50 of 350, seed 0 of 1" in fig._suptitle.get_text()
     # the settings, read from the runs' task: the authors' joint cost (Fig. 3.1 was theirs)
     assert ("the authors' settings (SVSL_LMOE code): joint cost without the base joint"
             in fig._suptitle.get_text())  # fmt: skip
     plt.close(fig)
+
+
+def test_score_labels_are_words_with_the_seeds_counted():
+    assert P.score_label("solved_rate", 1) == (
+        "share of draws that solve their target\n(IQM over 1 seed)"
+    )
+    assert P.score_label("coverage", 3).endswith("(IQM over 3 seeds)")
+    with pytest.raises(ValueError, match="unknown score 'solved'"):
+        P.score_label("solved", 3)
 
 
 def test_distinct_solutions_groups_wrapped_angles_within_the_threshold():

@@ -266,6 +266,28 @@ def test_fig_3_5_goes_logarithmic_only_where_returns_span_decades() -> None:
             in fig._suptitle.get_text())  # fmt: skip
 
 
+@pytest.mark.parametrize("last", [30.0, 900.0, 40_000.0])
+def test_fig_3_5_labels_the_episodes_of_every_panel(last: float) -> None:
+    """Every panel has labelled x ticks inside its range, linear or logarithmic, and the
+    three panels sit two per row."""
+    rows = []
+    for reward in sr.REWARDS:
+        for seed in range(2):
+            for ep in np.linspace(last / 10, last, 5):
+                rows += [("SVSL", reward, seed, ep, -100.0 - seed),
+                         ("PPO", reward, seed, 3 * ep, -90.0 - seed)]  # fmt: skip
+    curves = pd.DataFrame(rows, columns=["method", "reward", "seed", "episodes", "return"])
+    fig = sr.draw_fig_3_5(curves, "smoke")
+    fig.canvas.draw()
+    for ax in fig.axes:
+        lo, hi = ax.get_xlim()
+        labels = [t.get_text() for t in ax.get_xticklabels() if lo <= t.get_position()[0] <= hi]
+        assert len([t for t in labels if t]) >= 2, (ax.get_title(), labels)
+    tops = [round(ax.get_position().y1, 3) for ax in fig.axes]
+    assert max(tops.count(t) for t in tops) == 2
+    matplotlib.pyplot.close(fig)
+
+
 @pytest.mark.slow
 def test_fig_3_5_from_the_command_line(tiny_runs: dict, monkeypatch) -> None:
     """`vslbook figure fig3-5` draws the runs `reacher_runs` returns for the budget (here the

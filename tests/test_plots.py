@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import json
+import struct
+
 import matplotlib
 
 matplotlib.use("Agg")
@@ -40,9 +43,10 @@ def test_use_style_as_context_restores_settings():
     assert mpl.rcParams["axes.spines.top"] == before
 
 
-def test_method_colors_are_fixed_and_stable():
+def test_method_colors_are_fixed_and_unknown_methods_rejected():
     assert plots.method_color("dime") == plots.METHOD_COLORS["DIME"]
-    assert plots.method_color("some new method") == plots.method_color("some new method")
+    with pytest.raises(KeyError, match="METHOD_STYLES"):  # tests/test_plots_palette.py
+        plots.method_color("some new method")
 
 
 def test_learning_curve_draws_line_and_band(figures):
@@ -89,3 +93,24 @@ def test_interval_and_profile_plots(figures):
     assert len(right.lines) == 1
     (path,) = plots.save_figure(fig, "aggregates", formats=("png",))
     assert path.exists()
+
+
+def test_save_figure_writes_the_layout_a_notebook_shows(figures, monkeypatch):
+    monkeypatch.setenv("VSLBOOK_BUDGET", "smoke")
+    fig, axes = plt.subplots(2, 3, figsize=(9, 5))
+    image = axes[0, 0].imshow(np.eye(3))
+    fig.colorbar(image, ax=axes[0, 0])          # colorbars, twins and insets are no panels
+    axes[0, 1].twinx()
+    axes[0, 2].inset_axes([0.5, 0.5, 0.4, 0.4])
+    axes[1, 2].set_visible(False)
+    plots.save_figure(fig, "grid", formats=("png",))
+    layout = json.loads((figures / "grid.layout.json").read_text())
+    assert layout["id"] == "grid" and layout["budget"] == "smoke"
+    assert layout["panels_per_row"] == 3 and layout["dpi"] == fig.dpi
+    # the picture Jupyter's inline backend shows: the tight box at the figure's dpi
+    from IPython.core.pylabtools import print_figure
+
+    png = print_figure(fig, "png")
+    assert (layout["width_px"], layout["height_px"]) == struct.unpack(">II", png[16:24])
+    assert layout["width_in"] == pytest.approx(layout["width_px"] / fig.dpi, abs=1e-3)
+    assert not list(figures.glob("*.tmp"))

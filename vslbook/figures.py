@@ -18,7 +18,15 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator
 from vslbook.budget import Budget, get_budget
 from vslbook.data import paper_curves, paper_tasks
 from vslbook.movement import DMP, ProDMP, ProMP
-from vslbook.plots import learning_curve, method_color, save_figure, use_style
+from vslbook.plots import (
+    PALETTE,
+    PANELS_PER_ROW,
+    learning_curve,
+    method_color,
+    panel_grid,
+    save_figure,
+    use_style,
+)
 from vslbook.registry import register_figure
 from vslbook.stats import iqm_curve
 
@@ -28,7 +36,7 @@ def draw_movement_primitives(seed: int = 0, n_samples: int = 20) -> plt.Figure:
     ProDMP trajectories from different initial conditions (Section 2.6.1)."""
     use_style()
     gen = torch.Generator().manual_seed(seed)
-    fig, axes = plt.subplots(1, 3, figsize=(13, 3.6))
+    fig, axes = panel_grid(3, panel=(5.2, 3.6))
 
     promp = ProMP(n_basis=8, n_dof=1, duration=1.0, dt=0.01)
     t = promp.times.numpy()
@@ -54,7 +62,7 @@ def draw_movement_primitives(seed: int = 0, n_samples: int = 20) -> plt.Figure:
     dmp = DMP(n_basis=8, n_dof=1, duration=1.5, dt=0.01)
     w = 150 * torch.randn(n_samples // 2, 8, generator=gen, dtype=torch.float64)
     pos, _ = dmp.rollout(w, torch.zeros(1), torch.zeros(1), torch.ones(1))
-    axes[1].plot(dmp.times.numpy(), pos[..., 0].T.numpy(), lw=0.8, color=method_color("DIME"))
+    axes[1].plot(dmp.times.numpy(), pos[..., 0].T.numpy(), lw=0.8, color=PALETTE[1])
     axes[1].axhline(1.0, color="k", ls="--", lw=1, label="goal g")
     axes[1].set(title="DMP rollouts (Eq. 2.45)", xlabel="time [s]")
     axes[1].legend(loc="lower right", fontsize=8)
@@ -80,19 +88,15 @@ def draw_dime_published(tasks: list[str] | None = None, budget: Budget | None = 
     use_style()
     bud = get_budget(budget)
     tasks = tasks or paper_tasks()
-    cols = min(4, len(tasks))
-    rows = math.ceil(len(tasks) / cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.4 * cols, 2.6 * rows), squeeze=False)
-    for ax, task in zip(axes.flat, tasks, strict=False):
+    fig, axes = panel_grid(len(tasks), panel=(5.2, 3.0))
+    for ax, task in zip(axes, tasks, strict=True):
         curve = iqm_curve(paper_curves(task), reps=bud.bootstrap_reps)
         learning_curve(ax, curve, color=method_color("thesis"))
         ax.set(
             title=task, xlabel="env steps", ylabel="success" if task.startswith("myo") else "return"
         )
-    for ax in axes.flat[len(tasks) :]:
-        ax.set_visible(False)
     fig.suptitle("DIME, published learning curves (thesis data, 10 seeds): IQM ± 95 % CI")
-    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    fig.tight_layout()
     return fig
 
 
@@ -205,8 +209,9 @@ def draw_fig_5_2_published(budget: Budget | str | None = None) -> plt.Figure:
 def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
     """Fig. 5.3: DMC dog and humanoid, MyoSuite hand tasks, from the published DIME data.
 
-    Three rows as the thesis groups them (dog: 5.3a-d, humanoid: e-g, MyoSuite: h-k; see
-    :data:`FIG_5_3_ROWS`); each panel is the IQM over the 10 published seeds with its
+    The thesis's three task families one below the other (dog: 5.3a-d, humanoid: e-g,
+    MyoSuite: h-k; see :data:`FIG_5_3_ROWS`), each in rows of two panels (the legend takes
+    humanoid's free place); each panel is the IQM over the 10 published seeds with its
     95 % stratified-bootstrap CI (``budget.bootstrap_reps`` resamples). dog-run and
     humanoid-run are published to 3M env steps and drawn in full (a dotted line marks
     1M, the other panels' horizon; the thesis's 3M humanoid-run comparison is Fig. 5.8c).
@@ -215,16 +220,21 @@ def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
     """
     use_style()
     bud = get_budget(budget)
-    cols = max(len(panels) for _, panels in FIG_5_3_ROWS)
-    rows = len(FIG_5_3_ROWS)
-    fig, axes = plt.subplots(rows, cols, figsize=(3.25 * cols, 2.75 * rows + 0.9),
-                             squeeze=False)
-    for row, (header, panels) in zip(axes, FIG_5_3_ROWS, strict=True):
-        for ax, (task, title) in zip(row, panels, strict=False):
+    cols = PANELS_PER_ROW
+    family_rows = [math.ceil(len(panels) / cols) for _, panels in FIG_5_3_ROWS]
+    rows = sum(family_rows)
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 3.0 * rows + 1.0),
+                             squeeze=False)  # fmt: skip
+    spare, first = [], 0
+    for (header, panels), n_rows in zip(FIG_5_3_ROWS, family_rows, strict=True):
+        block = axes[first : first + n_rows].ravel()
+        first += n_rows
+        for ax, (task, title) in zip(block, panels, strict=False):
             _published_panel(ax, task, title, bud.bootstrap_reps)
-        label = row[0].annotate(header, xy=(0, 1), xycoords="axes fraction",
-                                xytext=(-42, 22), textcoords="offset points", ha="left",
-                                va="bottom", fontsize=11, fontweight="bold")
+        spare += list(block[len(panels) :])
+        label = block[0].annotate(header, xy=(0, 1), xycoords="axes fraction",
+                                  xytext=(-42, 22), textcoords="offset points", ha="left",
+                                  va="bottom", fontsize=11, fontweight="bold")  # fmt: skip
         label.set_in_layout(False)  # tight_layout leaves room for it through h_pad
     fig.suptitle("Fig. 5.3: DIME on DMC dog / humanoid and MyoSuite, "
                  "IQM ± 95 % stratified-bootstrap CI")
@@ -235,13 +245,10 @@ def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
         f"figure; their curves are not in the published data. dog-run and humanoid-run are "
         f"published to 3M env steps and drawn in full (dotted line: 1M, the other panels' "
         f"horizon).",
-        width=190,
+        width=125,
     )
-    fig.tight_layout(rect=(0, 0.04, 1, 0.965), h_pad=2.6)
-    spare = [
-        ax for row, (_, panels) in zip(axes, FIG_5_3_ROWS, strict=True) for ax in row[len(panels) :]
-    ]
-    if spare:  # the legend goes where the humanoid row has no fourth panel
+    fig.tight_layout(rect=(0, 0.035, 1, 0.975), h_pad=2.6)
+    if spare:  # the legend goes where the humanoid rows have no fourth panel
         box = spare[0].get_position()
         marker = Line2D([], [], color="0.4", ls=":", lw=1, label="1M steps (3M panels)")
         fig.legend(handles=[axes[0, 0].get_lines()[0], marker], loc="center",
@@ -275,7 +282,7 @@ def draw_diskill_curves(
     fig, ax = plt.subplots(figsize=(6, 4.2))
     draw_learning_curves(
         ax, DR.curves(runs, y, reps=b.bootstrap_reps),
-        ylabel=y.replace("_", " ") + " (IQM)", thesis=DR.THESIS_OUTCOME[figure],
+        ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure],
     )  # fmt: skip
     task = DR.FIGURES[figure][0]
     c = DR.counts(task, "diskill", b)
@@ -310,22 +317,16 @@ def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
     use_style()
     runs = run_set("fig3-1", b, Path(root), progress=progress)
     n = P.planar_counts(b)
-    fig, axes = plt.subplots(2, 3, figsize=(12, 8))
-    for j, variant in enumerate(P.VARIANTS):
-        model = P.load_model(runs[variant][0])
-        P.draw_solutions(axes[0, j], model)
-        axes[0, j].set_title(f"{variant}: mean solutions (seed 0)", fontsize=9)
-        P.draw_context_coverage(axes[1, j], model)
-        axes[1, j].set_title("context distributions", fontsize=9)
     full = P.planar_counts("full")
     k = n["iterations_per_expert"]
     k_full = full["iterations_per_expert"]
     k_note = "" if k == k_full else f", K = {k} of {k_full}"
-    fig.suptitle(f"Fig. 3.1 (ours, budget {b.name}: {n['n_experts']} experts{k_note}, seed 0 of "
-                 f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)\n"
-                 f"{settings_phrase('planar-reacher')}", fontsize=10)  # fmt: skip
-    fig.tight_layout()
-    return fig
+    return P.draw_fig_3_1(
+        {v: P.load_model(runs[v][0]) for v in P.VARIANTS},
+        title=f"Fig. 3.1 (ours, budget {b.name}: {n['n_experts']} experts{k_note}, seed 0 of "
+              f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)\n"
+              f"{settings_phrase('planar-reacher')}",
+    )  # fmt: skip
 
 
 def draw_fig_3_5_runs(budget: Budget | str | None = None, root: str | Path = "runs",

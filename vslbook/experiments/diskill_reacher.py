@@ -62,8 +62,12 @@ def active_experts(model: Any, contexts: np.ndarray, threshold: float = 0.0) -> 
 
 
 def _colors(k: int) -> np.ndarray:
-    cmap = plt.get_cmap("tab10" if k <= 10 else "tab20")
-    return np.array([cmap(i % cmap.N) for i in range(k)])
+    """RGBA rows of the first ``k`` experts' colours (:func:`vslbook.plots.expert_color`)."""
+    from matplotlib.colors import to_rgba
+
+    from vslbook.plots import expert_color
+
+    return np.array([to_rgba(expert_color(i)) for i in range(k)])
 
 
 def _disk(ax: plt.Axes) -> None:
@@ -93,12 +97,19 @@ def draw_context_regions(ax: plt.Axes, model: Any, grid: np.ndarray | None = Non
 
 
 def draw_active_experts(ax: plt.Axes, model: Any, grid: np.ndarray | None = None) -> plt.Axes:
-    """Fig. 4.2b: the number of experts with π(c | o) > p(c) at each goal."""
+    """Fig. 4.2b: the number of experts with π(c | o) > p(c) at each goal, one colour per
+    count (a discrete scale with a tick at each whole number)."""
+    from matplotlib.colors import BoundaryNorm
+
     grid = disk_grid() if grid is None else grid
     n = active_experts(model, grid)
-    sc = ax.scatter(grid[:, 0], grid[:, 1], c=n, s=18, marker="s", cmap="viridis",
-                    vmin=0, vmax=max(int(n.max()), 1), linewidths=0)  # fmt: skip
-    plt.colorbar(sc, ax=ax, label="active experts", shrink=0.8)
+    top = max(int(n.max()), 1)
+    cmap = plt.get_cmap("viridis", top + 1)  # one colour per count 0, 1, …, top
+    norm = BoundaryNorm(np.arange(-0.5, top + 1), cmap.N)
+    sc = ax.scatter(grid[:, 0], grid[:, 1], c=n, s=18, marker="s", cmap=cmap, norm=norm,
+                    linewidths=0)  # fmt: skip
+    bar = plt.colorbar(sc, ax=ax, label="active experts", shrink=0.8)
+    bar.set_ticks(np.arange(0, top + 1, max(1, (top + 10) // 11)))
     _disk(ax)
     ax.set_title("(b) experts with π(c|o) > p(c)")
     return ax

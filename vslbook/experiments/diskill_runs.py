@@ -24,7 +24,8 @@ from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
 from vslbook.progress import run_set_progress
 
 __all__ = [
-    "FIGURES", "LABELS", "METRIC", "PPO_TASKS", "REDUCED", "THESIS_AHEAD", "THESIS_OUTCOME",
+    "FIGURES", "LABELS", "METRIC", "METRIC_LABELS", "PPO_TASKS", "REDUCED", "THESIS_AHEAD",
+    "THESIS_OUTCOME",
     "counts", "curves", "env_id", "figure_runs", "final_scores", "load_model", "ppo_steps",
     "run_set",
 ]  # fmt: skip
@@ -63,6 +64,11 @@ THESIS_OUTCOME = {
     "4.4c": "thesis: Di-SkilL slightly > BBRL at the end > LinDi-SkilL",
     "4.4d": "thesis: Di-SkilL > BBRL > LinDi-SkilL",
 }
+#: What a metric of the runs measures, in words (the figures' axis labels).
+METRIC_LABELS = {
+    "test_return": "test return", "test_success": "test success rate",
+    "test_max_height": "maximal height [m]", "test_goal_distance": "goal distance [m]",
+}  # fmt: skip
 #: figure → what its panel plots: the test return (5LR, hopper jump) or success rate.
 METRIC = {
     "4.3b": "test_success", "4.3c": "test_return", "4.4a": "test_return",

@@ -49,7 +49,8 @@ def draw_skills(
     task = model.task
     if point not in task.path_names:
         raise ValueError(f"{task.name} records {task.path_names}, not {point!r}")
-    cmap = plt.get_cmap("tab10" if model.config.n_experts <= 10 else "tab20")
+    from vslbook.plots import expert_color
+
     rows, shown = [], False
     for s in skills(model, context, min_gating=min_gating):
         try:
@@ -60,7 +61,7 @@ def draw_skills(
         if not shown:
             ax.imshow(picture)
             shown = True
-        draw_path(ax, paths[point], color=cmap(s["expert"] % cmap.N), lw=2,
+        draw_path(ax, paths[point], color=expert_color(s["expert"]), lw=2,
                   label=f"expert {s['expert']} (π(o|c) {s['gating']:.2f})")  # fmt: skip
         rows.append(s | {"executed": True})
     if not shown:
@@ -68,6 +69,6 @@ def draw_skills(
         ax.text(0.5, 0.5, "every chosen expert's θ is rejected", transform=ax.transAxes,
                 ha="center", color="w", fontsize=9)  # fmt: skip
     else:
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=8, loc="lower right")
     ax.set_axis_off()
     return rows

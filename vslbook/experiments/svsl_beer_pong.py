@@ -265,9 +265,10 @@ def ball_trajectories(
 
 def draw_ball_trajectories(ax: plt.Axes, trajectories: list[dict[str, Any]]) -> plt.Axes:
     """Fig. 3.2g: ball height over time, one colour per expert (solid: in the cup)."""
-    cmap = plt.get_cmap("tab20")
+    from vslbook.plots import expert_color
+
     for tr in trajectories:
-        ax.plot(tr["t"], tr["z"], color=cmap(tr["expert"] % 20), lw=1.0,
+        ax.plot(tr["t"], tr["z"], color=expert_color(tr["expert"]), lw=1.0,
                 ls="-" if tr["success"] else ":")  # fmt: skip
     ax.set_xlabel("time [s]")
     ax.set_ylabel("ball z [m]")

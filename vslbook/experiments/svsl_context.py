@@ -282,14 +282,15 @@ def draw_context_gaussians(ax: plt.Axes, model: Any, dims: Sequence[int] = (0, 1
         raise ValueError(
             f"dims must be two different indices in [0, {mix.context_dim}), got {dims!r}"
         )
+    from vslbook.plots import expert_color
+
     weights = np.exp(mix.log_w)
-    cmap = plt.get_cmap("tab20")
     for i, (m, c) in enumerate(zip(mix.ctx_mean, mix.ctx_cov, strict=True)):
         vals, vecs = np.linalg.eigh(c[np.ix_(d, d)])
         angle = np.degrees(np.arctan2(vecs[1, -1], vecs[0, -1]))
         w, h = 4 * np.sqrt(np.maximum(vals[::-1], 1e-12))
         alpha = 0.15 + 0.6 * float(weights[i] / weights.max())
-        ax.add_patch(Ellipse(m[d], w, h, angle=angle, color=cmap(i % 20), alpha=alpha))
+        ax.add_patch(Ellipse(m[d], w, h, angle=angle, color=expert_color(i), alpha=alpha))
     return ax
 
 

@@ -44,7 +44,7 @@ here:
 from __future__ import annotations
 
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -96,6 +96,7 @@ __all__ = [
     "load_model",
     "method_config",
     "mixture_of",
+    "note_under",
     "run_method",
     "run_methods",
     "shared_task",
@@ -161,12 +162,15 @@ def train_baseline(
     stop_after: int | None = None,
     workers: int | None = 0,
     progress: bool = False,
+    final: Callable[[MixtureAlgorithm], dict[str, float]] | None = None,
 ) -> MixtureAlgorithm:
     """Iterations of HiREPS or LaDiPS in ``rd``, resuming from its checkpoint.
 
     Every ``extra["test_every"]`` iterations and at the end, θ ~ π(θ | c) is evaluated on
     ``extra["test_contexts"]`` fixed contexts from p(c) (as :meth:`SVSL.test`); with
-    ``extra["entropy_draws"]`` the expected mixture entropy is estimated there too. Stops
+    ``extra["entropy_draws"]`` the expected mixture entropy is estimated there too;
+    ``final(algo)`` adds metrics to the last iteration's row (Fig. 3.2e/f's success over
+    the cup grid, :func:`vslbook.experiments.ch3_algorithms.final_metrics`). Stops
     after ``stop_after`` iterations of this call (default: all), checkpointing there; the
     caller marks the run done once ``algo.iterations_done == config.iterations``.
     """
@@ -201,6 +205,8 @@ def train_baseline(
                 metrics["expected_entropy"] = expected_entropy(
                     mixture_of(algo), contexts, extra["entropy_draws"], rng
                 )
+        if final is not None and it == config.iterations:
+            metrics |= final(algo)
         metrics["iteration_seconds"] = time.perf_counter() - start  # tests included
         rd.log(it, **metrics)
         bar.update(1)
@@ -301,8 +307,9 @@ def draw_learning_curves(
     ax: plt.Axes, curves: pd.DataFrame, *, ylabel: str = "test return (IQM)",
     thesis: str | None = None,
 ) -> plt.Axes:  # fmt: skip
-    """One IQM line with its CI band per method over executed episodes, the thesis's
-    outcome (``thesis``) as text."""
+    """One IQM line with its CI band per method over executed episodes, each in its
+    method's style (:data:`vslbook.plots.METHOD_STYLES`); the thesis's outcome
+    (``thesis``) as a note under the axes."""
     from vslbook.plots import learning_curve
 
     for method, df in curves.groupby("method", sort=False):
@@ -311,6 +318,15 @@ def draw_learning_curves(
     ax.set_ylabel(ylabel)
     ax.legend(fontsize=8)
     if thesis:
-        ax.text(0.01, 0.01, thesis, transform=ax.transAxes, fontsize=7, va="bottom",
-                wrap=True, color="#555555")  # fmt: skip
+        note_under(ax, thesis)
     return ax
+
+
+def note_under(ax: plt.Axes, text: str, *, width: int = 70) -> None:
+    """``text`` in small italics under the axes' x label, wrapped at ``width`` characters;
+    the figure's tight or constrained layout leaves room for it."""
+    import textwrap
+
+    ax.annotate(textwrap.fill(text, width), xy=(0, 0), xycoords="axes fraction",
+                xytext=(0, -36), textcoords="offset points", ha="left", va="top",
+                fontsize=8, style="italic", color="0.3")  # fmt: skip

@@ -27,6 +27,7 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.figure import Figure
 from matplotlib.patches import Ellipse, Rectangle
 
 from vslbook.budget import Budget, get_budget
@@ -35,16 +36,20 @@ from vslbook.envs.robot.planar_reacher import OBSTACLES, link_points
 from vslbook.erl import hireps
 from vslbook.erl.svsl import SVSL, svsl_config
 from vslbook.experiments.svsl_mixtures import load_model
+from vslbook.plots import count_phrase, expert_color
 
 __all__ = [
     "FIG_CONTEXTS",
+    "SCORE_LABELS",
     "VARIANTS",
     "distinct_solutions",
     "draw_context_coverage",
+    "draw_fig_3_1",
     "draw_solutions",
     "load_model",
     "planar_counts",
     "planar_scores",
+    "score_label",
     "variant_config",
     "ways_around_obstacles",
 ]
@@ -221,11 +226,10 @@ def draw_solutions(ax: plt.Axes, model: Any, *, n_draws: int = 100, seed: int = 
     """Fig. 3.1a/d/e: the arms of the experts chosen for the six contexts, one colour each."""
     rng = np.random.default_rng(seed)
     th, o = _sample_means(model, FIG_CONTEXTS, n_draws, rng)
-    cmap = plt.get_cmap("tab20")
     for j in range(len(FIG_CONTEXTS)):
         for expert in np.unique(o[j]):
             pts = link_points(th[j][o[j] == expert][0])
-            ax.plot(pts[:, 0], pts[:, 1], "-", color=cmap(int(expert) % 20), lw=1.2, alpha=0.8)
+            ax.plot(pts[:, 0], pts[:, 1], "-", color=expert_color(expert), lw=1.2, alpha=0.8)
             ax.plot(*pts[-1], "o", color="green", ms=3)
     _draw_scene(ax)
     return ax
@@ -246,16 +250,58 @@ def draw_context_coverage(ax: plt.Axes, model: Any) -> plt.Axes:
     means, covs = _context_gaussians(model)
     log_w = model.model.log_w if isinstance(model, SVSL) else model.mix.log_prior
     weights = np.exp(log_w)
-    cmap = plt.get_cmap("tab20")
     for i, (m, c) in enumerate(zip(means, covs, strict=True)):
         vals, vecs = np.linalg.eigh(c)
         angle = np.degrees(np.arctan2(vecs[1, -1], vecs[0, -1]))
         w, h = 4 * np.sqrt(np.maximum(vals[::-1], 1e-12))
         alpha = 0.15 + 0.6 * float(weights[i] / weights.max())
-        ax.add_patch(Ellipse(m, w, h, angle=angle, color=cmap(i % 20), alpha=alpha))
+        ax.add_patch(Ellipse(m, w, h, angle=angle, color=expert_color(i), alpha=alpha))
     ax.add_patch(Rectangle((4.5, -6), 2.5, 12, fill=False, ls="--", color="grey"))
     ax.plot(FIG_CONTEXTS[:, 0], FIG_CONTEXTS[:, 1], "o", color="red", ms=4)
-    ax.set_xlim(3.5, 8)
-    ax.set_ylim(-7.5, 7.5)
+    ax.set_xlim(2.25, 9.25)  # the box [4.5, 7] x [-6, 6] and what spills out of it
+    ax.set_ylim(-8, 8)
     ax.set_aspect("equal")
     return ax
+
+
+#: What each score of :func:`planar_scores` measures, in words (the axis labels of the
+#: figure of the scores).
+SCORE_LABELS = {
+    "tip_distance": "mean distance of the tip to the target",
+    "collision_rate": "share of draws that collide",
+    "mean_return": "mean return",
+    "solved_rate": "share of draws that solve their target",
+    "modes_per_context": "distinct solutions per target",
+    "ways_per_context": "ways around the obstacles per target",
+    "experts_per_context": "experts drawn per target",
+    "coverage": "share of targets inside an expert's context distribution",
+}
+
+
+def score_label(key: str, seeds: int) -> str:
+    """The axis label of score ``key`` (:data:`SCORE_LABELS`) aggregated over ``seeds``."""
+    if key not in SCORE_LABELS:
+        raise ValueError(f"unknown score {key!r}; expected one of {sorted(SCORE_LABELS)}")
+    return f"{SCORE_LABELS[key]}\n(IQM over {count_phrase(seeds, 'seed')})"
+
+
+def draw_fig_3_1(models: dict[str, Any], title: str = "") -> Figure:
+    """Fig. 3.1 for one model per variant of :data:`VARIANTS` (a row each): the mean
+    solutions of the experts chosen at the six targets (a, d, e; :func:`draw_solutions`)
+    and the per-expert context distributions (c, f; :func:`draw_context_coverage`)."""
+    missing = [v for v in VARIANTS if v not in models]
+    if missing:
+        raise ValueError(f"no model of variant(s) {missing}; expected {{variant: model}}")
+    fig, axes = plt.subplots(len(VARIANTS), 2, figsize=(9.0, 5.6 * len(VARIANTS)),
+                             gridspec_kw={"width_ratios": (1.8, 1.0)},
+                             layout="constrained")  # fmt: skip
+    for row, variant in zip(axes, VARIANTS, strict=True):
+        draw_solutions(row[0], models[variant])
+        row[0].set_title(f"{variant}: mean solutions at the six targets", fontsize=10)
+        draw_context_coverage(row[1], models[variant])
+        row[1].set_title("context distributions", fontsize=10)
+    for ax in axes.ravel():
+        ax.set(xlabel="x", ylabel="y")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig

@@ -269,15 +269,45 @@ def final_returns(curves: pd.DataFrame, reps: int | None = None) -> pd.DataFrame
     return pd.DataFrame(rows)
 
 
+def _compact(value: float, _pos: object = None) -> str:
+    """A tick label such as 0, 500, 20k, 1.5M."""
+    for scale, suffix in ((1e6, "M"), (1e3, "k")):
+        if abs(value) >= scale:
+            return f"{value / scale:g}{suffix}"
+    return f"{value:g}"
+
+
+def _episodes_axis(ax: plt.Axes, episodes: np.ndarray) -> None:
+    """Episodes on a symmetric-log axis where they span more than a decade past 100 (PPO's
+    count runs far beyond SVSL's), else on a linear one; either way with labelled ticks."""
+    from matplotlib.ticker import FixedLocator, FuncFormatter, MaxNLocator
+
+    x = episodes[np.isfinite(episodes)]
+    lo, hi = (float(x.min()), float(x.max())) if x.size else (0.0, 1.0)
+    for subs in ((1, 2, 5), (1, 3), (1,)):  # the densest set of at most six ticks
+        ticks = [m * 10.0**k for k in range(2, 10) for m in subs if lo <= m * 10.0**k <= hi]
+        if len(ticks) <= 6:
+            break
+    if hi > 20 * max(lo, 100.0) and len(ticks) >= 2:
+        ax.set_xscale("symlog", linthresh=100)
+        ax.xaxis.set_major_locator(FixedLocator(ticks))
+    else:
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=5))
+    ax.xaxis.set_major_formatter(FuncFormatter(_compact))
+
+
 def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Figure:
     """Fig. 3.5: IQM return and 95 % bootstrap band per method, one panel per reward.
 
-    ``curves`` is :func:`reacher_curves`'s frame. The footnote states the budget, seeds, N, K
-    and PPO length and how they differ from the thesis; each panel names the thesis's
-    reported outcome (labelled as the thesis's); the title's second line names the settings
+    ``curves`` is :func:`reacher_curves`'s frame. Panels (a), (b) and (c) fill a two-by-two
+    grid; the fourth cell holds the footnote: the budget, seeds, N, K and PPO length and how
+    they differ from the thesis. Each panel names the thesis's reported outcome (labelled
+    as the thesis's); the title's second line names the settings
     (:func:`vslbook.experiments.ch3_settings.settings_phrase`: the thesis's, there is no
     public code for this task).
     """
+    import textwrap
+
     from vslbook import plots, stats
     from vslbook.experiments.ch3_settings import settings_phrase
 
@@ -286,7 +316,7 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
     missing = {"method", "reward", "seed", "episodes", "return"} - set(curves.columns)
     if missing:
         raise ValueError(f"curves lacks column(s) {sorted(missing)}; use reacher_curves()")
-    fig, axes = plt.subplots(1, 3, figsize=(13.5, 4.2))
+    fig, axes = plots.panel_grid(len(REWARDS), panel=(5.2, 3.9))
     for ax, reward, letter in zip(axes, REWARDS, "abc", strict=True):
         sub = curves[curves["reward"].astype(str) == reward]
         spans: list[np.ndarray] = []
@@ -299,7 +329,7 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
             )
             plots.learning_curve(ax, curve, x="episodes", label=method)
             spans.append(np.abs(curve["iqm"].to_numpy(dtype=float)))
-        ax.set_xscale("symlog", linthresh=100)
+        _episodes_axis(ax, sub["episodes"].to_numpy(dtype=float))
         size = np.concatenate(spans) if spans else np.ones(1)
         size = size[np.isfinite(size) & (size > 0)]
         if size.size and size.max() > 100 * size.min():  # e.g. Eq. 3.10: PPO's early -4e5
@@ -316,19 +346,21 @@ def draw_fig_3_5(curves: pd.DataFrame, budget: Budget | str | None = None) -> Fi
     k = "/".join(str(n["iterations_per_expert"][r]) for r in REWARDS)
     ppo_rewards = ", ".join(n["ppo_rewards"])
     fig.suptitle(
-        "Fig. 3.5: episode-based SVSL vs step-based PPO, 5-link reacher — thesis reports: "
+        "Fig. 3.5: episode-based SVSL vs step-based PPO, 5-link reacher\nthesis reports: "
         "PPO ahead with 3.8; SVSL ahead with 3.9 and, clearly, 3.10\n"
         f"ours: {settings_phrase('reacher5-ch3')}",
         fontsize=10,
     )
-    fig.text(
-        0.01, 0.005,
-        f"Budget {b.name}: {n['seeds']} seed(s) (thesis 20); SVSL N = {n['n_experts']} "
-        f"(thesis 40), K = {k} (thesis 250/250/800); PPO {n['ppo_steps']:,} steps = "
-        f"{n['ppo_steps'] // N_STEPS:,} episodes on Eq. {ppo_rewards} (thesis: length not "
-        f"stated).\nReturn on {n['eval_goals']} fixed goals; SVSL samples o and θ, PPO its "
-        "mean action. IQM, 95 % stratified-bootstrap band (thesis: mean ± 2 s.e.).",
-        fontsize=7.5, va="bottom",
-    )  # fmt: skip
-    fig.tight_layout(rect=(0, 0.07, 1, 0.92))
+    fig.tight_layout()
+    notes = [
+        f"Budget {b.name}: {plots.count_phrase(n['seeds'], 'seed')} (thesis 20); SVSL N = "
+        f"{n['n_experts']} (thesis 40), K = {k} (thesis 250/250/800); PPO "
+        f"{n['ppo_steps']:,} steps = {n['ppo_steps'] // N_STEPS:,} episodes on Eq. "
+        f"{ppo_rewards} (thesis: length not stated).",
+        f"Return on {n['eval_goals']} fixed goals; SVSL samples o and θ, PPO its mean "
+        "action. IQM, 95 % stratified-bootstrap band (thesis: mean ± 2 s.e.).",
+    ]
+    cell = axes[0].get_subplotspec().get_gridspec()[1, 1].get_position(fig)
+    fig.text(cell.x0 + 0.02, cell.y1, "\n\n".join(textwrap.fill(t, 62) for t in notes),
+             fontsize=8.5, va="top")  # fmt: skip
     return fig

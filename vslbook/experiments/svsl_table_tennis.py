@@ -90,8 +90,8 @@ TASK = "table-tennis-ch3"
 
 #: The two context planes of Fig. 3.2d: name -> (context indices, axis labels).
 PLANES: dict[str, tuple[tuple[int, int], tuple[str, str]]] = {
-    "goal": ((0, 1), ("goal x_des [m]", "goal y_des [m]")),
-    "incoming": ((2, 3), ("incoming ball x_inc [m]", "incoming ball y_inc [m]")),
+    "goal": ((0, 1), ("landing goal x [m]", "landing goal y [m]")),
+    "incoming": ((2, 3), ("incoming ball x [m]", "incoming ball y [m]")),
 }
 
 #: What the thesis reports for the table-tennis panels (Section 3.4.2, Fig. 3.2b/d,
