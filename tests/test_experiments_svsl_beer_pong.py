@@ -224,3 +224,16 @@ def test_success_grid_on_smoke_svsl(smoke_runs, monkeypatch):
     B.draw_ball_trajectories(ax[2], trajs)
     assert len(ax[1].patches) == model.model.n_experts + 1
     plt.close(fig)
+
+
+@pytest.mark.slow
+def test_every_method_logs_its_final_grid_success(smoke_runs, monkeypatch):
+    """Fig. 3.2e/f's number: the final row holds the success over the budget's cup grid of
+    the final model (means of experts drawn from π(o | c)), which the claims are checked on."""
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    counts = B.beer_pong_counts("smoke")
+    for method, (path,) in smoke_runs.items():
+        rows = RunDir.open(path).metrics()
+        assert [r for r in rows[:-1] if "grid_success" in r] == [], method
+        grid = B.success_grid(B.load_model(path), counts["grid"], n_draws=counts["grid_draws"])
+        assert rows[-1]["grid_success"] == pytest.approx(grid.mean()), method

@@ -21,7 +21,7 @@ def _run(root: Path, name: str, env: str, finals: list[float | None]) -> Path:
     path = root / name
     path.mkdir(parents=True)
     (path / "config.json").write_text(json.dumps({"env": env, "seed": 0}))
-    rows = [{"step": i, "test_success": v} for i, v in enumerate(finals)]
+    rows = [{"step": i, "test_success": v, "grid_success": v} for i, v in enumerate(finals)]
     (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
     return path
 
