@@ -53,11 +53,32 @@ import vslbook
 from vslbook.bounds import show
 from vslbook.bounds import svsl as S
 from vslbook.budget import get_budget
+from vslbook.data import measurements
+from vslbook.experiments.figure_sources import source_text
 from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
 use_style()
-print(f"budget: {budget.name}  (set VSLBOOK_BUDGET=smoke|reduced|full)")
+print(f"budget of the live cells: {budget.name}; {source_text()}")
+
+
+# %% [markdown]
+# ## Results at a glance
+#
+# The thesis's claims about this chapter's robot results, checked on the runs its figures
+# draw (recorded full-budget runs where `data/results/` has them; see the line above for
+# where else they come from). `met` / `not met` compare final IQMs over the seeds recorded
+# so far; `pending`: a method has no finished run yet; `smoke`: smoke runs test the code
+# path only. The figures, with ours beside the thesis's numbers, are in Sections 7 and 9 (Fig. 3.2); the
+# derivations come first below.
+
+# %%
+from pathlib import Path
+
+from vslbook.experiments.reproduction import claims_overview
+
+display(claims_overview(["fig3-2"], budget, Path(vslbook.__file__).resolve().parents[1] / "runs",
+                        reps=budget.bootstrap_reps))
 
 
 # %% [markdown]
@@ -389,18 +410,22 @@ import time
 from pathlib import Path
 
 from vslbook.experiments import svsl_planar as P
-from vslbook.experiments.ch3_runs import figure_runs, run_set
+from vslbook.experiments.ch3_runs import figure_runs
 from vslbook.experiments.ch3_settings import settings_phrase
+from vslbook.experiments.figure_sources import figure_set
 from vslbook.plots import interval_plot
 from vslbook.stats import interval_estimates
 
-counts = P.planar_counts(budget)
-print("counts at this budget:", counts)
 root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
 no_resp = next(r for r in figure_runs("fig3-1", budget) if r.overrides)
 print("each run is one `vslbook run` command, e.g.", no_resp.command(root))
 t0 = time.perf_counter()
-planar_runs = run_set("fig3-1", budget, root, progress=True)  # variant -> run directories
+# recorded runs (data/results/), finished ones in runs/, or trained now: figure_sources
+planar_set = figure_set("fig3-1", budget, root, progress=True)
+print(planar_set.caption())
+planar_runs = planar_set.runs  # variant -> run directories
+counts = P.planar_counts(planar_set.budget)  # the counts of the runs drawn
+n_seeds = len(planar_runs[P.VARIANTS[0]])
 print(f"{sum(map(len, planar_runs.values()))} runs ready in {time.perf_counter() - t0:.0f} s")
 models = {v: [P.load_model(p) for p in paths] for v, paths in planar_runs.items()}
 
@@ -409,8 +434,8 @@ planar_settings = settings_phrase("planar-reacher")  # read from the runs' task 
 print("settings:", planar_settings)
 fig = P.draw_fig_3_1(
     {v: ms[0] for v, ms in models.items()},  # seed 0 of each variant
-    title=f"Fig. 3.1 (ours, budget {budget.name}: {counts['n_experts']} experts, seed 0 of "
-    f"{counts['seeds']}; thesis: 60 experts, best of 15 seeds)\n{planar_settings}",
+    title=f"Fig. 3.1 (ours, budget {planar_set.budget}: {counts['n_experts']} experts, seed 0 "
+    f"of {n_seeds}; thesis: 60 experts, best of 15 seeds)\n{planar_settings}",
 )
 save_figure(fig, "fig-3-1-planar")
 plt.show()
@@ -430,38 +455,39 @@ plt.show()
 # some expert's 2σ context ellipse (coverage) or, at the six targets, the experts drawn per
 # target; IQM with 95 % stratified-bootstrap CIs over the seeds.
 #
-# **What we found on versatility** (our runs, not the thesis's). Precision, validity and
-# coverage reproduce under both readings. Versatility depends on the reading.
-# At the six figure targets the thesis's order shows at 30 experts (15 seeds of each
-# variant: 1.39 ways per target with the responsibilities against 1.19 without; at the
-# `reduced` budget's 3 seeds 1.39 against 1.17, HiREPS 0.89), but not at the thesis's 60
-# (12 seeds: 1.40 against 1.57). Over targets from $p(c)$ the order is reversed at both
-# sizes (30 experts: 1.27 against 1.51, range 1.13–1.42 against 1.24–1.80; 60 experts: 1.27
-# against 1.70), and the count of distinct solutions agrees with the ways, so it is not an
-# artefact of the 1 rad threshold. The reason is where the context distributions sit:
-# without the responsibilities they crowd into the top and bottom of the box, so 8.5–13.7
-# experts (25 at the middle targets with 60 experts) are drawn for one target, each
-# converged from its own exploration; they find more ways where they crowd, and solve fewer
-# of the middle targets, where none of them was trained (Fig. 3.1f's "extrapolated
-# solutions"; 0.70 against 0.97 of the draws at the six targets with 60 experts).
-# With the responsibilities 2.5–3.3 experts share a target and cover the whole box.
+# **What we found on versatility** (runs made outside the book, ours and the authors' code,
+# recorded in `data/measurements/planar_versatility.csv` with their provenance and printed
+# below). Precision, validity and coverage reproduce under both readings; versatility
+# depends on the reading. At the six figure targets the thesis's order (more ways with the
+# responsibilities) shows with 30 experts but not with the thesis's 60. Over targets from
+# $p(c)$ the order is reversed at both sizes, and the count of distinct solutions agrees
+# with the ways, so it is not an artefact of the 1 rad threshold. The reason is where the
+# context distributions sit: without the responsibilities they crowd into the top and
+# bottom of the box, so many more experts are drawn for one target, each converged from its
+# own exploration; they find more ways where they crowd, and solve fewer of the middle
+# targets, where none of them was trained (Fig. 3.1f's "extrapolated solutions"). With the
+# responsibilities a few experts share a target and cover the whole box.
 #
 # **The authors' code agrees with ours.** Their planar-reacher code, run outside this book
 # with its run script's settings (60 experts added to the first, K = 350, α = 1e-4, line 13
 # on, their reward, which leaves the base joint out of the joint cost; 2 seeds of each
-# variant, about 37 min of one core per run), scored with the same functions, gives over
-# $p(c)$ 1.72 ways per target with the responsibilities against 2.10 without (solved 0.98
-# against 0.73, coverage 0.94 against 0.77, 3.2 against 12.5 experts drawn per target) and
-# at the six targets 2.25 against 1.67. Our code with the same reward
-# (`exclude_base_joint=True`, 60 experts, 7 seeds of each variant) gives 1.64 against 2.18
-# over $p(c)$ (solved 0.99 against 0.72, coverage 0.91 against 0.80, 3.2 against 12.6
-# experts) and 1.83 against 1.81 at the six targets; the authors' two seeds with the
-# responsibilities (2.17 and 2.33 there) lie at the top of our range (1.50–2.17). So the
-# reversed order over $p(c)$ is the algorithm's (both seeds of each variant; the ranges
-# 1.64–1.79 and 2.06–2.15 do not overlap), not a fault of this implementation; the
-# thesis's statement rests on the six middle targets of one picked model. Neither α (1e-4
-# to 1), line 13, the reward nor the number of experts changes this (earlier measurements:
-# a larger α buys exploration, not modes; α = 1 solves 3 % of the draws).
+# variant), scored with the same functions, reverses the order over $p(c)$ as ours does with
+# the same reward (`exclude_base_joint=True`, 60 experts), and its seeds' ranges do not
+# overlap; so the reversed order is the algorithm's, not a fault of this implementation,
+# and the thesis's statement rests on the six middle targets of one picked model. The cell
+# below reads the table and checks these statements on it. Neither α (1e-4 to 1), line 13,
+# the reward nor the number of experts changes this (earlier measurements: a larger α buys
+# exploration, not modes).
+
+# %%
+versatility = measurements("planar_versatility.csv")  # provenance: data/measurements/README.md
+ways = versatility[versatility["measure"] == "ways_per_target"].pivot_table(
+    index=["code", "reward", "n_experts", "seeds", "reading"], columns="variant", values="value")
+display(ways.round(2))
+w, wo = "with responsibilities", "without responsibilities"
+for (code, reward, n, seeds, reading), row in ways.iterrows():
+    order = "with > without (the thesis's order)" if row[w] > row[wo] else "without > with"
+    print(f"{code:7s} reward={reward:6s} {n:2d} experts, {seeds:2d} seeds, {reading}: {order}")
 
 # %% tags=["full-width"]
 readings = {  # (the targets, draws per target) of each reading
@@ -485,7 +511,7 @@ for ax_col, (reading, keys) in zip(axes.T, reading_keys.items(), strict=True):
     for ax, key in zip(ax_col, keys, strict=True):
         table = {v: np.array([[s[key]] for s in sc]) for v, sc in scores[reading].items()}
         point, ci = interval_estimates(table, reps=budget.bootstrap_reps)
-        interval_plot(ax, point, ci, xlabel=P.score_label(key, counts["seeds"]))
+        interval_plot(ax, point, ci, xlabel=P.score_label(key, n_seeds))
         iqm_of[reading][key] = {v: float(point[v][0]) for v in P.VARIANTS}
         for v in P.VARIANTS:
             print(f"{reading:>22} {key:>20} {v:>28}: {point[v][0]:.3f} "
@@ -494,8 +520,8 @@ for ax_col, (reading, keys) in zip(axes.T, reading_keys.items(), strict=True):
 for ax in axes[:, 1]:
     ax.tick_params(labelleft=False)  # the variants are named on the left
 fig.suptitle(
-    f"Fig. 3.1 scores (ours, budget {budget.name}: {counts['n_experts']} experts, "
-    f"{count_phrase(counts['seeds'], 'seed')}; thesis: 60 experts, 15 seeds)\n{planar_settings}",
+    f"Fig. 3.1 scores (ours, budget {planar_set.budget}: {counts['n_experts']} experts, "
+    f"{count_phrase(n_seeds, 'seed')}; thesis: 60 experts, 15 seeds)\n{planar_settings}",
     fontsize=10,
 )
 fig.tight_layout()
@@ -510,7 +536,7 @@ for reading, keys in reading_keys.items():
         a, b = iqm_of[reading][key][with_r], iqm_of[reading][key][without_r]
         better = thesis_expects[key]
         agrees = a > b if better == "higher" else a < b
-        verdict = "as in the thesis" if agrees else "NOT as in the thesis"
+        verdict = planar_set.verdict("as in the thesis" if agrees else "NOT as in the thesis")
         print(f"{reading}, {key}: with {a:.3f}, without {b:.3f} -> the thesis expects {better}"
               f" with the responsibilities: {verdict}")  # fmt: skip
 
@@ -539,11 +565,18 @@ for reading, keys in reading_keys.items():
 
 # %% tags=["full-width"]
 from vslbook.experiments import svsl_beer_pong as BP
+from vslbook.experiments.reproduction import reproduction_text
 
-bp_counts = BP.beer_pong_counts(budget)
-print("counts at this budget:", bp_counts)
 t0 = time.perf_counter()
-bp_runs = BP.run_all(root, budget, progress=True)  # method -> run directories
+bp_set = figure_set("fig3-2", budget, root, envs=(BP.ENV,), progress=True)
+print(bp_set.caption())
+bp_runs = bp_set.runs  # method -> run directories
+bp_counts = BP.beer_pong_counts(bp_set.budget)
+print("counts of these runs:", bp_counts)
+# the grids drawn here: 100 draws on 13 x 20 cells (full) take minutes per model, so a
+# recorded full run is drawn on the reduced grid; its final number (grid_success, below)
+# was measured on the full grid when it was trained
+grid_counts = BP.beer_pong_counts("reduced" if bp_set.budget == "full" else bp_set.budget)
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 
@@ -558,16 +591,17 @@ axes[0, 1].set_title("Fig. A.1: expected entropy")
 BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
 axes[1, 0].set_title("(c) SVSL context distributions (seed 0)")
 for ax, m in zip(axes[2], ("SVSL", "HiREPS"), strict=True):
-    grid = BP.success_grid(bp_models[m], bp_counts["grid"], n_draws=bp_counts["grid_draws"])
-    BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0)")
+    grid = BP.success_grid(bp_models[m], grid_counts["grid"], n_draws=grid_counts["grid_draws"])
+    BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0, "
+                         f"{grid_counts['grid_draws']} draws per cell)")
 trajs = BP.ball_trajectories(bp_models["SVSL"], np.array([0.0, -1.7]),
                              n_draws=bp_counts["trajectory_draws"])  # fmt: skip
 BP.draw_ball_trajectories(axes[1, 1], trajs)
 axes[1, 1].set_title("(g) SVSL: ball height, cup at (0, -1.7)")
 fig.suptitle(
-    f"Fig. 3.2 beer pong and Fig. A.1 (ours, budget {budget.name}: SVSL N = "
+    f"Fig. 3.2 beer pong and Fig. A.1 (ours, budget {bp_set.budget}: SVSL N = "
     f"{bp_counts['n_experts']}, K = {bp_counts['iterations_per_expert']}, "
-    f"{count_phrase(bp_counts['seeds'], 'seed')}; thesis: N = 70, K = 750, 20 seeds)\n"
+    f"{count_phrase(len(bp_runs['SVSL']), 'seed')}; thesis: N = 70, K = 750, 20 seeds)\n"
     f"{settings_phrase('beer-pong')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
@@ -576,6 +610,8 @@ fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
 fig.tight_layout()
 save_figure(fig, "fig-3-2-beer-pong")
 plt.show()
+# ours beside the thesis's numbers, and the thesis's claims checked on the final scores
+print(reproduction_text("fig3-2", bp_set, "test_success", reps=budget.bootstrap_reps))
 
 # %% [markdown]
 # ## 8. Fig. 3.5 — episode-based against step-based RL on the 5-link reacher
@@ -598,10 +634,12 @@ plt.show()
 from vslbook.experiments import svsl_reacher as RE
 
 t0 = time.perf_counter()
-reacher_runs = RE.reacher_runs(root, budget, progress=True)
+reacher_set = figure_set("fig3-5", budget, root, progress=True)
+print(reacher_set.caption())
+reacher_runs = RE.by_method_and_reward(reacher_set.runs)  # (method, reward) -> runs
 print(f"reacher runs ready in {time.perf_counter() - t0:.0f} s")
 reacher_curves = RE.reacher_curves(reacher_runs)
-fig = RE.draw_fig_3_5(reacher_curves, budget)
+fig = RE.draw_fig_3_5(reacher_curves, reacher_set.budget)
 save_figure(fig, "fig-3-5-reacher")
 plt.show()
 
@@ -618,7 +656,7 @@ for reward, rows in finals.groupby("reward", sort=False):
     verdict = rows["as_in_thesis"].iloc[0]
     if verdict is not None:
         print(f"  ahead: {rows['ahead'].iloc[0]}; the thesis: {RE.THESIS_AHEAD[reward]} -> "
-              f"{'as in the thesis' if verdict else 'NOT as in the thesis'}")
+              + reacher_set.verdict("as in the thesis" if verdict else "NOT as in the thesis"))
 
 # %% [markdown]
 # ## 9. Fig. 3.2 (table tennis) and Fig. A.2
@@ -640,10 +678,12 @@ for reward, rows in finals.groupby("reward", sort=False):
 # %% tags=["full-width"]
 from vslbook.experiments import svsl_table_tennis as TT
 
-tt_counts = TT.table_tennis_counts(budget)
-print("counts at this budget:", tt_counts)
 t0 = time.perf_counter()
-tt_runs = TT.run_all(root, budget, progress=True)
+tt_set = figure_set("fig3-2", budget, root, envs=(TT.ENV,), progress=True)
+print(tt_set.caption())
+tt_runs = tt_set.runs  # method -> run directories
+tt_counts = TT.table_tennis_counts(tt_set.budget)
+print("counts of these runs:", tt_counts)
 print(f"table tennis runs ready in {time.perf_counter() - t0:.0f} s")
 tt_svsl = TT.load_model(tt_runs["SVSL"][0])
 fig, axes = panel_grid(4, panel=(5.5, 4.2))
@@ -656,9 +696,9 @@ TT.draw_context_coverage(axes[3], tt_svsl, plane="incoming")
 axes[2].set_title("(d) SVSL, goal plane (seed 0)")
 axes[3].set_title("(d) SVSL, incoming-ball plane (seed 0)")
 fig.suptitle(
-    f"Fig. 3.2 table tennis and Fig. A.2 (ours, budget {budget.name}: SVSL N = "
+    f"Fig. 3.2 table tennis and Fig. A.2 (ours, budget {tt_set.budget}: SVSL N = "
     f"{tt_counts['n_experts']}, K = {tt_counts['iterations_per_expert']}, "
-    f"{count_phrase(tt_counts['seeds'], 'seed')}; thesis: N = 50, K = 800, 20 seeds)\n"
+    f"{count_phrase(len(tt_runs['SVSL']), 'seed')}; thesis: N = 50, K = 800, 20 seeds)\n"
     f"{settings_phrase('table-tennis-ch3')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(TT.THESIS_OUTCOME[k] for k in ("curves", "coverage", "entropy")),
@@ -687,7 +727,7 @@ c33, strikes = TT.versatile_strikes(tt_svsl, n=3, seed=0)
 fig, axes = panel_grid(3, panel=(5.2, 4.4), layout="constrained")  # room for the title
 TT.draw_fig_3_3(axes, c33, strikes)
 fig.suptitle(
-    f"Fig. 3.3 (ours, budget {budget.name}, SVSL with "
+    f"Fig. 3.3 (ours, budget {tt_set.budget}, SVSL with "
     f"{count_phrase(TT.mixture_of(tt_svsl).n_experts, 'expert')}; thesis: 50): strikes for "
     f"c = {np.array2string(c33, precision=2)}\n{settings_phrase('table-tennis-ch3')}",
     fontsize=10,

@@ -48,6 +48,7 @@ from vslbook.budget import get_budget
 from vslbook.data import paper_curves
 from vslbook.experiments.ch5_runs import chapter5_figure, figure_runs
 from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
+from vslbook.experiments.figure_sources import source_text
 from vslbook.plots import (
     count_phrase,
     learning_curve,
@@ -65,7 +66,7 @@ use_style()
 ROOT = Path(vslbook.__file__).resolve().parents[1]
 RUNS = ROOT / "runs"
 TABLES = ROOT / "build" / "tables"  # live runs' tables; data/results/ holds recorded sets
-print(f"budget: {budget.name} ({budget.seeds} seeds per configuration)")
+print(f"budget: {budget.name} ({budget.seeds} seeds per configuration); {source_text()}")
 
 
 # %% [markdown]

@@ -237,3 +237,10 @@ def test_every_method_logs_its_final_grid_success(smoke_runs, monkeypatch):
         assert [r for r in rows[:-1] if "grid_success" in r] == [], method
         grid = B.success_grid(B.load_model(path), counts["grid"], n_draws=counts["grid_draws"])
         assert rows[-1]["grid_success"] == pytest.approx(grid.mean()), method
+
+
+def test_env_ids_name_the_tasks():
+    from vslbook.experiments import svsl_table_tennis as TT
+    from vslbook.experiments.ch3_algorithms import env_of
+
+    assert env_of(B.TASK) == B.ENV and env_of(TT.TASK) == TT.ENV

@@ -308,3 +308,19 @@ def test_fig_3_5_from_the_command_line(tiny_runs: dict, monkeypatch) -> None:
     assert seen == {"root": tiny_runs["root"], "budget": "smoke", "progress": False}
     assert len(fig.axes) == 3 and all(ax.lines for ax in (fig.axes[0], fig.axes[2]))
     plt.close(fig)
+
+
+def test_figure_set_methods_key_by_method_and_reward():
+    from pathlib import Path
+
+    from vslbook.experiments.ch3_runs import figure_runs
+    from vslbook.experiments.svsl_reacher import by_method_and_reward
+
+    runs = {}
+    for r in figure_runs("fig3-5", "smoke"):
+        runs.setdefault(r.method, []).append(Path(r.name))
+    keyed = by_method_and_reward(runs)
+    assert set(keyed) == {(r.algo.upper(), r.overrides["reward"])
+                          for r in figure_runs("fig3-5", "smoke")}  # fmt: skip
+    with pytest.raises(ValueError, match="expected a Fig. 3.5 method such as 'SVSL Eq. 3.8'"):
+        by_method_and_reward({"SVSL": []})

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import numbers
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -208,4 +209,8 @@ def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path,
     assert [r["step"] for r in RunDir(probe).metrics()] == [0, 1]  # up to the checkpoint
     assert not RunDir(probe).done and fs.probes == {run.name: "1/2 step"}
     assert "probes, still training: diskill s0 at 1/2 step" in fs.caption()
+    assert fs.verdict("x") == SMOKE_VERDICT  # smoke first; at full a probe-only set says so
+    from vslbook.experiments.figure_sources import PROBE_VERDICT
+
+    assert replace(fs, budget="full").verdict("x") == PROBE_VERDICT
     assert [r for r in result_rows([FIGURE]) if r["method"] == "diskill"] == []

@@ -77,3 +77,24 @@ def test_a_run_without_the_metric_is_named(tmp_path):
     path = _run(tmp_path, "r", BP, [None])
     with pytest.raises(ValueError, match=r"r: no 'test_success' in its metrics"):
         final_scores({"SVSL": [path]}, "test_success")
+
+
+def test_a_run_without_the_claims_metric_is_not_logged(tmp_path):
+    path = _run(tmp_path, "old", BP, [0.5])
+    rows = [{"step": 0, "test_success": 0.5}]  # written before grid_success was logged
+    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    fs = FigureSet("fig3-2", "full", {"SVSL": [path]})
+    assert set(verdicts("fig3-2", fs, "test_success", reps=50)["status"]) == {"not logged"}
+
+
+def test_overview_reads_each_figures_runs(monkeypatch, tmp_path):
+    import vslbook.experiments.figure_sources as FS
+    from vslbook.experiments.reproduction import claims_overview
+
+    svsl = [_run(tmp_path, f"s{i}", BP, [v]) for i, v in enumerate((0.9, 0.95))]
+    fake = FigureSet("fig3-2", "full", {"SVSL": svsl}, recorded={"s0": {}, "s1": {}})
+    monkeypatch.setattr(FS, "figure_set", lambda figure, budget, root: fake)
+    table = claims_overview(["fig3-2"], reps=50)
+    assert list(table["status"]) == ["met", "pending"]
+    assert list(table["runs"]) == ["recorded, full", "recorded, full"]
+    assert table["seeds"].iloc[0] == "SVSL 2"

@@ -38,14 +38,16 @@ from vslbook.budget import BUDGETS, ENV_VAR, Budget, get_budget
 from vslbook.experiments.run_plan import FigureRun, figure_runs
 from vslbook.results import RunDir, RunDirError
 
-__all__ = ["MODES", "RETRAIN_ENV", "SMOKE_VERDICT", "SOURCE_ENV", "FigureSet", "figure_set",
-           "source_mode"]  # fmt: skip
+__all__ = ["MODES", "PROBE_VERDICT", "RETRAIN_ENV", "SMOKE_VERDICT", "SOURCE_ENV", "FigureSet",
+           "figure_set", "source_mode", "source_text"]  # fmt: skip
 
 SOURCE_ENV = "VSLBOOK_SOURCE"
 RETRAIN_ENV = "VSLBOOK_RETRAIN"
 MODES = ("best", "budget", "retrain")
 #: what a figure says instead of a verdict when its runs are smoke runs
 SMOKE_VERDICT = "smoke: code path only (a few iterations or steps; not compared with the thesis)"
+#: what a figure says instead of a verdict when every run it draws is a probe
+PROBE_VERDICT = "probes: runs still training, not compared with the thesis"
 _LARGEST_FIRST = ("full", "reduced", "smoke")
 
 
@@ -63,6 +65,18 @@ def source_mode() -> str:
     if os.environ.get(RETRAIN_ENV, "").strip().lower() in ("1", "true", "yes"):
         return "retrain"
     return "budget" if os.environ.get(ENV_VAR, "").strip() else "best"
+
+
+def source_text() -> str:
+    """One line for a notebook's first cell: where its figures' runs come from."""
+    return {
+        "best": "figures draw recorded runs (data/results/, the largest budget) or finished "
+                "ones in runs/, else train smoke runs now (set VSLBOOK_BUDGET to train a "
+                "budget's)",
+        "budget": "figures draw this budget's recorded or finished runs, and train what it "
+                  "lacks",
+        "retrain": "figures train every run of this budget (finished ones are reused)",
+    }[source_mode()]
 
 
 @dataclass
@@ -107,8 +121,13 @@ class FigureSet:
         return {p.name: p for paths in self.runs.values() for p in paths}
 
     def verdict(self, text: str) -> str:
-        """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke."""
-        return SMOKE_VERDICT if self.smoke else text
+        """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke, or
+        :data:`PROBE_VERDICT` where every run is a probe."""
+        if self.smoke:
+            return SMOKE_VERDICT
+        if self.probes and len(self.probes) == sum(map(len, self.runs.values())):
+            return PROBE_VERDICT
+        return text
 
     def caption(self) -> str:
         """One line: budget, origin (recorded: code version and date; trained), seeds per

@@ -27,8 +27,8 @@ import pandas as pd
 
 from vslbook.results import RunDir
 
-__all__ = ["CLAIMS", "THESIS_NUMBERS", "Claim", "final_scores", "reproduction_text",
-           "verdicts"]  # fmt: skip
+__all__ = ["CLAIMS", "THESIS_NUMBERS", "Claim", "claims_overview", "final_scores",
+           "reproduction_text", "verdicts"]  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -135,7 +135,8 @@ def _check(claim: Claim, scores: pd.DataFrame) -> str:
 def verdicts(figure: str, fs, metric: str, *, reps: int | None = None) -> pd.DataFrame:
     """The claims of ``figure`` (:data:`CLAIMS`) checked on the runs of the
     :class:`~vslbook.experiments.figure_sources.FigureSet` ``fs``: one row per claim with
-    its text, status (``met``, ``not met``, ``pending``, ``smoke``) and the seeds behind it.
+    its text, status (``met``, ``not met``, ``pending``, ``smoke``, or ``not logged`` where a
+    run predates the claim's metric) and the seeds behind it.
     """
     rows = []
     for claim in CLAIMS.get(figure, ()):
@@ -143,8 +144,12 @@ def verdicts(figure: str, fs, metric: str, *, reps: int | None = None) -> pd.Dat
         if claim.env is not None:
             runs = {m: [p for p in ps if RunDir(p).config.get("env") == claim.env]
                     for m, ps in runs.items()}  # fmt: skip
-        scores = final_scores(runs, claim.metric or metric, reps=reps, skip=set(fs.probes))
-        status = "smoke" if fs.smoke else _check(claim, scores)
+        try:
+            scores = final_scores(runs, claim.metric or metric, reps=reps, skip=set(fs.probes))
+        except ValueError:  # a run made before the metric was logged
+            scores, status = final_scores({}, metric), "not logged"
+        else:
+            status = "smoke" if fs.smoke else _check(claim, scores)
         seeds = {m: int(n) for m, n in zip(scores["method"], scores["runs"], strict=True)
                  if m in (claim.method, claim.other)}  # fmt: skip
         rows.append({"claim": claim.text, "status": status, "seeds": seeds})
@@ -172,3 +177,23 @@ def reproduction_text(figure: str, fs, metric: str, *, reps: int | None = None) 
         status = "smoke: code path only" if v.status == "smoke" else v.status
         lines.append(f"  {status:>22}: {v.claim}")
     return "\n".join(lines)
+
+
+def claims_overview(figures: list[str], budget=None, root: str | Path = "runs", *,
+                    reps: int | None = None) -> pd.DataFrame:  # fmt: skip
+    """What a chapter opens with: every claim of ``figures`` checked on the runs each figure
+    draws (:func:`vslbook.experiments.figure_sources.figure_set`: recorded, finished, or
+    trained now): figure, claim, status, seeds, and where the runs come from (budget,
+    recorded or trained)."""
+    from vslbook.experiments.figure_sources import figure_set
+    from vslbook.experiments.record import figure_metric
+
+    rows = []
+    for figure in figures:
+        fs = figure_set(figure, budget, root)
+        origin = "recorded" if fs.recorded else "trained"
+        for v in verdicts(figure, fs, figure_metric(figure), reps=reps).itertuples():
+            rows.append({"figure": figure, "claim": v.claim, "status": v.status,
+                         "seeds": ", ".join(f"{m} {n}" for m, n in v.seeds.items()) or "-",
+                         "runs": f"{origin}, {fs.budget}"})  # fmt: skip
+    return pd.DataFrame(rows, columns=["figure", "claim", "status", "seeds", "runs"])

@@ -59,6 +59,7 @@ from vslbook.experiments.svsl_mixtures import (
 )
 
 __all__ = [
+    "ENV",
     "METHODS",
     "TASK",
     "THESIS_OUTCOME",
@@ -81,6 +82,8 @@ __all__ = [
 ]
 
 TASK = "beer-pong"
+#: its one-step gymnasium id (``vslbook run ... --env``; the figure's runs of this task)
+ENV = "vslbook/BeerPong-v0"
 
 #: What the thesis reports for the beer-pong panels (Section 3.4.2, Fig. 3.2, A.3.2.1).
 THESIS_OUTCOME = {

@@ -62,6 +62,7 @@ __all__ = [
     "METHODS",
     "REWARDS",
     "THESIS_OUTCOME",
+    "by_method_and_reward",
     "draw_fig_3_5",
     "final_returns",
     "reacher_configs",
@@ -178,6 +179,19 @@ def reacher_runs(
         for run in figure_runs("fig3-5", budget):
             key = (run.algo.upper(), run.overrides["reward"])
             out.setdefault(key, []).append(run.train(root, progress=progress))
+    return out
+
+
+def by_method_and_reward(runs: dict[str, list[Path]]) -> dict[tuple[str, str], list[Path]]:
+    """A :class:`~vslbook.experiments.figure_sources.FigureSet`'s runs of ``fig3-5``
+    (method keys such as ``"SVSL Eq. 3.8"``) keyed ``(method, reward)`` as
+    :func:`reacher_runs` gives them."""
+    out = {}
+    for key, paths in runs.items():
+        method, sep, reward = key.partition(" Eq. ")
+        if not sep:
+            raise ValueError(f"expected a Fig. 3.5 method such as 'SVSL Eq. 3.8', got {key!r}")
+        out[(method, reward)] = paths
     return out
 
 

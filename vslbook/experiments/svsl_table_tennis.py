@@ -64,6 +64,7 @@ from vslbook.experiments.svsl_mixtures import (
 )
 
 __all__ = [
+    "ENV",
     "METHODS",
     "PLANES",
     "TASK",
@@ -87,6 +88,8 @@ __all__ = [
 ]
 
 TASK = "table-tennis-ch3"
+#: its one-step gymnasium id (``vslbook run ... --env``; the figure's runs of this task)
+ENV = "vslbook/TableTennisCh3-v0"
 
 #: The two context planes of Fig. 3.2d: name -> (context indices, axis labels).
 PLANES: dict[str, tuple[tuple[int, int], tuple[str, str]]] = {
