@@ -185,7 +185,7 @@ def test_skills_at_a_context(reacher_runs):
 def test_chapter4_curves_from_the_command_line(tmp_path, monkeypatch):
     """`vslbook figure fig4-4a`: trains the hopper-jump run set in ./runs and saves the panel,
     whose title says how the counts differ from the thesis's."""
-    from vslbook import figures
+    from vslbook.experiments import figure_draws
     from vslbook.registry import FIGURES
 
     monkeypatch.setenv("VSLBOOK_WORKERS", "1")
@@ -193,10 +193,10 @@ def test_chapter4_curves_from_the_command_line(tmp_path, monkeypatch):
     paths = FIGURES["fig4-4a"].make(budget="smoke", out_dir=tmp_path / "out")
     assert sorted(p.name for p in paths) == ["fig4-4a.pdf", "fig4-4a.png"]
     assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3  # Di-SkilL, BBRL, LinDi-SkilL
-    fig = figures.draw_diskill_curves("4.4a", "smoke", tmp_path / "runs", progress=False)
+    fig = figure_draws.draw_diskill_curves("4.4a", "smoke", tmp_path / "runs", progress=False)
     title = fig.axes[0].get_title()
     assert "the authors' settings, budget smoke: 2 of 1400 iterations, 1 of 24 seeds, " \
            "2 of 3 experts, 4 of 100 samples" in title  # HJ: the code's 100 samples (B.5: 80)
     plt.close(fig)
     with pytest.raises(ValueError, match="unknown figure '4.7'"):
-        figures.draw_diskill_curves("4.7", "smoke", tmp_path / "runs")
+        figure_draws.draw_diskill_curves("4.7", "smoke", tmp_path / "runs")

@@ -244,3 +244,23 @@ def test_env_ids_name_the_tasks():
     from vslbook.experiments.ch3_algorithms import env_of
 
     assert env_of(B.TASK) == B.ENV and env_of(TT.TASK) == TT.ENV
+
+
+@pytest.mark.slow
+def test_fig_3_2_is_a_registered_figure(smoke_runs, monkeypatch, tmp_path):
+    """`vslbook figure fig3-2`: beer pong's and table tennis's curves and the two success
+    grids, from the figure's runs (here the module's smoke runs, table tennis trained now),
+    with where they came from under the figure."""
+    import vslbook.figures  # noqa: F401 -- registers the figures
+    from vslbook.experiments import figure_draws
+    from vslbook.registry import FIGURES
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    assert "fig3-2" in FIGURES
+    root = smoke_runs["SVSL"][0].parent
+    fig = figure_draws.draw_fig_3_2("smoke", root, progress=False)
+    titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
+    assert any(t.startswith("(a) beer pong") for t in titles)
+    assert any(t.startswith("(e) SVSL: success") for t in titles)
+    assert any("Runs of fig3-2" in t.get_text() for t in fig.texts)
+    plt.close(fig)

@@ -85,15 +85,15 @@ def test_smoke_run_reloads_and_is_reused(variant, tmp_path):
 def test_fig_3_1_from_the_command_line(tmp_path, monkeypatch):
     """`vslbook figure fig3-1`: the notebook's planar run set in ./runs, six panels, and a
     title that says how the counts differ from the thesis's."""
-    from vslbook import figures
     from vslbook.cli import main
+    from vslbook.experiments import figure_draws
 
     monkeypatch.setenv("VSLBOOK_WORKERS", "1")
     monkeypatch.chdir(tmp_path)
     assert main(["figure", "fig3-1", "--budget", "smoke", "--out", str(tmp_path / "out")]) == 0
     assert (tmp_path / "out" / "fig3-1.png").stat().st_size > 10_000
     assert len(list((tmp_path / "runs").glob("*/DONE"))) == 3
-    fig = figures.draw_fig_3_1("smoke", tmp_path / "runs", progress=False)
+    fig = figure_draws.draw_fig_3_1("smoke", tmp_path / "runs", progress=False)
     assert len(fig.axes) == 6
     fig.canvas.draw()  # a row per variant: its solutions and its context distributions
     centres = [round((ax.get_position().y0 + ax.get_position().y1) / 2, 2) for ax in fig.axes]

@@ -290,23 +290,28 @@ def test_fig_3_5_labels_the_episodes_of_every_panel(last: float) -> None:
 
 @pytest.mark.slow
 def test_fig_3_5_from_the_command_line(tiny_runs: dict, monkeypatch) -> None:
-    """`vslbook figure fig3-5` draws the runs `reacher_runs` returns for the budget (here the
-    module's tiny runs stand in for the figure's smoke runs)."""
+    """`vslbook figure fig3-5` draws the runs `figure_set` gives for the budget (here the
+    module's tiny runs stand in for the figure's smoke runs), with their caption below."""
     import matplotlib.pyplot as plt
 
-    from vslbook import figures
+    import vslbook.experiments.figure_sources as FS
+    from vslbook.experiments import figure_draws
 
-    paths = {k: v for k, v in tiny_runs.items() if isinstance(k, tuple)}
+    runs = {f"{m} Eq. {r}": v for (m, r), v in
+            ((k, v) for k, v in tiny_runs.items() if isinstance(k, tuple))}  # fmt: skip
     seen = {}
 
-    def fake_runs(root, budget, *, progress=False):
-        seen.update(root=root, budget=budget.name, progress=progress)
-        return paths
+    def fake_set(figure, budget, root, *, mode=None, progress=False, **kw):
+        seen.update(figure=figure, budget=budget, root=root, mode=mode)
+        return FS.FigureSet(figure, "smoke", runs, trained=[p.name for v in runs.values()
+                                                             for p in v])  # fmt: skip
 
-    monkeypatch.setattr(sr, "reacher_runs", fake_runs)
-    fig = figures.draw_fig_3_5_runs("smoke", tiny_runs["root"], progress=False)
-    assert seen == {"root": tiny_runs["root"], "budget": "smoke", "progress": False}
+    monkeypatch.setattr(FS, "figure_set", fake_set)
+    fig = figure_draws.draw_fig_3_5("smoke", tiny_runs["root"], progress=False)
+    assert seen == {"figure": "fig3-5", "budget": "smoke", "root": tiny_runs["root"],
+                    "mode": "budget"}  # fmt: skip
     assert len(fig.axes) == 3 and all(ax.lines for ax in (fig.axes[0], fig.axes[2]))
+    assert any("smoke: code path only" in t.get_text() for t in fig.texts)
     plt.close(fig)
 
 

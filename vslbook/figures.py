@@ -17,6 +17,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, MultipleLocator
 
 from vslbook.budget import Budget, get_budget
 from vslbook.data import paper_curves, paper_tasks
+from vslbook.experiments import figure_draws
 from vslbook.movement import DMP, ProDMP, ProMP
 from vslbook.plots import (
     PALETTE,
@@ -258,91 +259,6 @@ def draw_fig_5_3_published(budget: Budget | str | None = None) -> plt.Figure:
     return fig
 
 
-def draw_diskill_curves(
-    figure: str, budget: Budget | str | None = None, root: str | Path = "runs",
-    *, progress: bool = True,
-) -> plt.Figure:  # fmt: skip
-    """One Chapter 4 learning-curve panel (Figs. 4.3b, 4.3c, 4.4a-d) at a budget.
-
-    Trains the figure's run set in ``root`` where not finished (as the ``04_diskill``
-    notebook does: :mod:`vslbook.experiments.erl_run_sets`), then draws the IQM and 95 %
-    stratified-bootstrap band over seeds of the test return or success against executed
-    episodes, with the thesis's outcome and the counts that differ from the thesis's.
-    """
-    from vslbook.experiments import diskill_runs as DR
-    from vslbook.experiments.erl_run_sets import RUN_SETS
-    from vslbook.experiments.svsl_mixtures import draw_learning_curves
-
-    if figure not in DR.FIGURES:
-        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(DR.FIGURES)}")
-    b = get_budget(budget)
-    use_style()
-    runs = RUN_SETS[4][figure](b, Path(root), progress)
-    y = DR.METRIC[figure]
-    fig, ax = plt.subplots(figsize=(6, 4.2))
-    draw_learning_curves(
-        ax, DR.curves(runs, y, reps=b.bootstrap_reps),
-        ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure],
-    )  # fmt: skip
-    task = DR.FIGURES[figure][0]
-    c = DR.counts(task, "diskill", b)
-    full = DR.counts(task, "diskill", "full")
-    cfg = DR.diskill_config(task, "diskill")
-    differs = [f"{c['iterations']} of {full['iterations']} iterations",
-               f"{c['seeds']} of {full['seeds']} seeds"]  # fmt: skip
-    if "n_experts" in c:
-        differs.append(f"{c['n_experts']} of {cfg.n_experts} experts")
-    if "samples_per_expert" in c:
-        differs.append(f"{c['samples_per_expert']} of {cfg.samples_per_expert} samples per expert")
-    source = "the authors' settings" if cfg.settings == "code" else "the thesis's settings"
-    ax.set_title(f"Fig. {figure}: {task} (ours, {source}, budget {b.name}: "
-                 + ", ".join(differs) + ")", fontsize=8, wrap=True)  # fmt: skip
-    fig.tight_layout()
-    return fig
-
-
-def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
-                 *, progress: bool = True) -> plt.Figure:  # fmt: skip
-    """Fig. 3.1 (Section 3.4.1) at a budget: SVSL with and without the responsibilities and
-    HiREPS on the planar reacher, seed 0 — the chosen experts' mean solutions at six targets and the
-    per-expert context distributions. Trains the figure's declared runs
-    (:func:`vslbook.experiments.ch3_runs.figure_runs`, as the ``03_svsl`` notebook does) in
-    ``root`` where not finished. The title's second line names the settings the runs' task
-    uses (:func:`vslbook.experiments.ch3_settings.settings_phrase`)."""
-    from vslbook.experiments import svsl_planar as P
-    from vslbook.experiments.ch3_runs import run_set
-    from vslbook.experiments.ch3_settings import settings_phrase
-
-    b = get_budget(budget)
-    use_style()
-    runs = run_set("fig3-1", b, Path(root), progress=progress)
-    n = P.planar_counts(b)
-    full = P.planar_counts("full")
-    k = n["iterations_per_expert"]
-    k_full = full["iterations_per_expert"]
-    k_note = "" if k == k_full else f", K = {k} of {k_full}"
-    return P.draw_fig_3_1(
-        {v: P.load_model(runs[v][0]) for v in P.VARIANTS},
-        title=f"Fig. 3.1 (ours, budget {b.name}: {n['n_experts']} experts{k_note}, seed 0 of "
-              f"{n['seeds']}; thesis: 60 experts, best of 15 seeds)\n"
-              f"{settings_phrase('planar-reacher')}",
-    )  # fmt: skip
-
-
-def draw_fig_3_5_runs(budget: Budget | str | None = None, root: str | Path = "runs",
-                      *, progress: bool = True) -> plt.Figure:  # fmt: skip
-    """Fig. 3.5 (Section 3.4.3) at a budget: SVSL against PPO on the 5-link reacher with the
-    rewards of Eqs. 3.8-3.10.
-    Trains the figure's declared runs (:func:`vslbook.experiments.ch3_runs.figure_runs`, as
-    the ``03_svsl`` notebook does) in ``root`` where not finished."""
-    from vslbook.experiments import svsl_reacher as RE
-
-    b = get_budget(budget)
-    use_style()
-    runs = RE.reacher_runs(Path(root), b, progress=progress)
-    return RE.draw_fig_3_5(RE.reacher_curves(runs), b)
-
-
 def _saver(fig_id: str, draw):
     def make(budget: Budget | None = None, out_dir: str | Path | None = None) -> list[Path]:
         fig = draw(budget=budget)
@@ -365,11 +281,14 @@ _register("fig5-2-published", lambda budget=None: draw_fig_5_2_published(budget=
           "Fig. 5.2 (a)-(b): Ant-v3, Humanoid-v3 from the published DIME curves (IQM, 95 % CI)")
 _register("fig5-3-published", lambda budget=None: draw_fig_5_3_published(budget=budget),
           "Fig. 5.3: dog, humanoid, MyoSuite (11 panels) from the published DIME curves")
-_register("fig3-1", lambda budget=None: draw_fig_3_1(budget=budget),
-          "Fig. 3.1: SVSL with / without responsibilities and HiREPS, planar reacher, in ./runs")
-_register("fig3-5", lambda budget=None: draw_fig_3_5_runs(budget=budget),
-          "Fig. 3.5: SVSL against PPO on the 5-link reacher (Eqs. 3.8-3.10), trained in ./runs")
+_RUNS = "recorded runs, finished ones in ./runs, or trained now (--budget: that budget's)"
+_register("fig3-1", lambda budget=None: figure_draws.draw_fig_3_1(budget=budget),
+          f"Fig. 3.1: SVSL with / without responsibilities and HiREPS, planar reacher; {_RUNS}")
+_register("fig3-2", lambda budget=None: figure_draws.draw_fig_3_2(budget=budget),
+          f"Fig. 3.2 (a, b, e, f): beer pong and table tennis, SVSL, HiREPS, LaDiPS; {_RUNS}")
+_register("fig3-5", lambda budget=None: figure_draws.draw_fig_3_5(budget=budget),
+          f"Fig. 3.5: SVSL against PPO on the 5-link reacher (Eqs. 3.8-3.10); {_RUNS}")
 for _fig in ("4.3b", "4.3c", "4.4a", "4.4b", "4.4c", "4.4d"):
     _register("fig" + _fig.replace(".", "-"),
-              lambda budget=None, _f=_fig: draw_diskill_curves(_f, budget=budget),
-              f"Fig. {_fig}: Chapter 4 learning curves, trained at the budget in ./runs")
+              lambda budget=None, _f=_fig: figure_draws.draw_diskill_curves(_f, budget=budget),
+              f"Fig. {_fig}: Chapter 4 learning curves; {_RUNS}")
