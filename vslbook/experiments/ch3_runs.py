@@ -31,7 +31,6 @@ from vslbook.budget import Budget, get_budget
 from vslbook.experiments.ch3_algorithms import PPO_ENVS, env_of, task_counts
 from vslbook.experiments.run_plan import FigureRun
 from vslbook.experiments.svsl_context import METHODS
-from vslbook.progress import run_set_progress
 
 __all__ = ["FIGURE_TASKS", "METRIC", "PLANAR_OVERRIDES", "figure_runs", "reacher_method",
            "run_set"]  # fmt: skip
@@ -125,20 +124,14 @@ def run_set(
 ) -> dict[str, list[Path]]:  # fmt: skip
     """Train (or reuse, where finished) every run of ``figure`` at ``budget`` in ``root``
     (:func:`figure_runs`, :meth:`FigureRun.train`): method → run directories in seed order;
-    ``methods`` picks some of them.
+    ``methods`` picks some of them. :func:`vslbook.experiments.figure_sources.figure_set` in
+    mode ``retrain``.
 
     Raises:
         ValueError: a method the figure does not draw.
         RuntimeError: a run diverged.
     """
-    runs = figure_runs(figure, budget)
-    known = tuple(dict.fromkeys(r.method for r in runs))
-    unknown = [m for m in methods or () if m not in known]
-    if unknown:
-        raise ValueError(f"figure {figure} has no method(s) {unknown}; expected some of {known}")
-    out: dict[str, list[Path]] = {}
-    with run_set_progress(f"{figure} runs"):  # one line per set on the book's pages
-        for r in runs:
-            if methods is None or r.method in methods:
-                out.setdefault(r.method, []).append(r.train(root, progress=progress))
-    return out
+    from vslbook.experiments.figure_sources import figure_set
+
+    return figure_set(figure, budget, root, methods=methods, mode="retrain",
+                      progress=progress).runs  # fmt: skip

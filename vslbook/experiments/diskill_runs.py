@@ -21,7 +21,6 @@ import pandas as pd
 from vslbook.budget import Budget, get_budget
 from vslbook.erl.diskill_config import diskill_config
 from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
-from vslbook.progress import run_set_progress
 
 __all__ = [
     "FIGURES", "LABELS", "METRIC", "METRIC_LABELS", "PPO_TASKS", "REDUCED", "THESIS_AHEAD",
@@ -174,19 +173,14 @@ def run_set(
     methods: tuple[str, ...] | None = None,
     progress: bool = False,
 ) -> dict[str, list[Path]]:
-    """Train (or reuse) every run of ``figure`` at ``budget`` (:func:`figure_runs`):
-    method → run directories; ``methods`` picks some of them."""
-    runs = figure_runs(figure, budget)
-    known = tuple(dict.fromkeys(r.method for r in runs))
-    for method in methods or ():
-        if method not in known:
-            raise ValueError(f"figure {figure} has no method {method!r}; expected {known}")
-    out: dict[str, list[Path]] = {}
-    with run_set_progress(f"Fig. {figure} runs"):  # one line per set on the book's pages
-        for r in runs:
-            if methods is None or r.method in methods:
-                out.setdefault(r.method, []).append(r.train(root, progress=progress))
-    return out
+    """Train (or reuse) every run of ``figure`` (``4.3b`` or ``fig4-3b``) at ``budget``
+    (:func:`figure_runs`): method → run directories; ``methods`` picks some of them.
+    :func:`vslbook.experiments.figure_sources.figure_set` in mode ``retrain``."""
+    from vslbook.experiments.figure_sources import figure_set
+
+    fig_id = "fig" + figure.removeprefix("fig").replace(".", "-")
+    return figure_set(fig_id, budget, root, methods=methods, mode="retrain",
+                      progress=progress).runs  # fmt: skip
 
 
 def ppo_steps(task: str, budget: Budget | str | None = None) -> int:
