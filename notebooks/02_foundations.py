@@ -187,7 +187,12 @@ grad_exact = np.concatenate([
     -2 * np.diag(A) * var0,
 ])
 
-# Score-function estimates (Eqs. 2.31 and 2.33) with torch autograd for grad log pi.
+# %% [markdown]
+# The score-function estimates (Eqs. 2.31 and 2.33), with torch autograd for
+# $\nabla_\omega\log\pi_\omega$, a hundred batches of a thousand episodes, each compared with the
+# closed form in standard errors:
+
+# %%
 K, k, log_std = (torch.tensor(x, requires_grad=True) for x in (K0, k0, log_std0))
 zero, eye = torch.zeros(d_t, dtype=torch.float64), torch.eye(d_t, dtype=torch.float64)
 weights = {"R (Eq. 2.31)": [], "A = R - V (Eq. 2.33)": [], "score alone": []}
@@ -977,11 +982,12 @@ for n in range(N_steps, 0, -1):
     var[n - 1] = g_b[n - 1] ** 2 * var[n] + v_b[n - 1]
     cov_up[n - 1] = g_b[n - 1] * var[n]                                   # Cov(x^{n-1}, x^n)
 
+# %% [markdown]
+# Eq. 2.66 term by term from these moments, then Eq. 2.65 as one KL between the two joint
+# Gaussians (`vslbook.bounds.gaussian_chains`):
 
-def expected_log_normal(mean_diff_sq, v):
-    """E[log N(y | mu, v)] when E[(y - mu)^2] = mean_diff_sq."""
-    return -0.5 * math.log(2 * math.pi * v) - mean_diff_sq / (2 * v)
-
+# %%
+from vslbook.bounds.gaussian_chains import chain_joint, expected_log_normal
 
 eq_266 = expected_log_normal(var[N_steps], eta_ou**2)                     # E log p_N(x^N)
 for n in range(1, N_steps + 1):
@@ -989,13 +995,6 @@ for n in range(1, N_steps + 1):
     sq = var[n] + a_fwd**2 * var[n - 1] - 2 * a_fwd * cov_up[n - 1] + (mu[n] - a_fwd * mu[n - 1]) ** 2
     eq_266 -= expected_log_normal(sq, var_fwd)                            # E log q_{n|n-1}
 eq_266 -= expected_log_normal(var[0] + (mu[0] - m0) ** 2, sd0**2)         # E log q(x^0)
-
-
-def chain_joint(B, b, std):
-    """Mean and covariance of x = B x + b + diag(std) eps (B nilpotent)."""
-    inv = np.linalg.inv(np.eye(len(b)) - B)
-    return inv @ b, (inv * std) @ (inv * std).T
-
 
 B_fwd = np.diag(np.full(N_steps, a_fwd), -1)                              # x^n depends on x^{n-1}
 B_bwd = np.diag(g_b, 1)                                                   # x^{n-1} depends on x^n

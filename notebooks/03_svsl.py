@@ -204,17 +204,9 @@ assert not bad.passed, "with beta < alpha the bound must break"
 # perturbs random experts of the toy model and verifies each step.
 
 # %%
+from vslbook.bounds.path_plot import plot_path
+
 exp_report = show(S.check_expert_bound(seed=0))
-
-
-def plot_path(ax, report, what):
-    d = report.data
-    ax.plot(d["t"], d["path_objective"], "-", color="k", label="objective J (Eq. 3.3)")
-    ax.plot(d["t"], d["path_bound"], "--", color=method_color("ours"), label="bound, π̃ = old model")
-    ax.axvline(0.0, color="#999999", lw=0.8)
-    ax.set(xlabel=f"step along a random perturbation of {what}", ylabel="value")
-    ax.legend(fontsize=8)
-
 
 fig, ax = plt.subplots(figsize=(5.5, 3.2))
 plot_path(ax, exp_report, "one expert")
@@ -504,6 +496,12 @@ scores = {
     r: {v: [P.planar_scores(m, **kw) for m in ms] for v, ms in models.items()}
     for r, kw in readings.items()
 }
+
+# %% [markdown]
+# Each score as IQM and 95 % interval over the seeds, a row per score and a column per
+# reading:
+
+# %% tags=["full-width"]
 fig, axes = plt.subplots(5, 2, figsize=(11, 13))  # a row per score, a column per reading
 iqm_of: dict[str, dict[str, dict[str, float]]] = {}
 for ax_col, (reading, keys) in zip(axes.T, reading_keys.items(), strict=True):
@@ -528,6 +526,10 @@ fig.tight_layout()
 save_figure(fig, "fig-3-1-scores")
 plt.show()
 
+# %% [markdown]
+# The thesis's direction for each score, checked on these IQMs:
+
+# %%
 with_r, without_r = P.VARIANTS[0], P.VARIANTS[1]
 thesis_expects = {"solved_rate": "higher", "collision_rate": "lower", "modes_per_context": "higher",
                   "ways_per_context": "higher", "coverage": "higher"}  # fmt: skip
@@ -580,6 +582,11 @@ grid_counts = BP.beer_pong_counts("reduced" if bp_set.budget == "full" else bp_s
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 
+# %% [markdown]
+# The panels of Fig. 3.2 (beer pong) and Fig. A.1 from these runs, seed 0 where a panel
+# shows one model:
+
+# %% tags=["full-width"]
 fig, axes = plt.subplots(3, 2, figsize=(11, 13))
 BP.draw_learning_curves(axes[0, 0], BP.learning_curves(bp_runs), thesis=None)
 axes[0, 0].set_title("(a) test return")
@@ -610,7 +617,11 @@ fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
 fig.tight_layout()
 save_figure(fig, "fig-3-2-beer-pong")
 plt.show()
-# ours beside the thesis's numbers, and the thesis's claims checked on the final scores
+
+# %% [markdown]
+# Ours beside the thesis's numbers, and the thesis's claims checked on the final scores:
+
+# %%
 print(reproduction_text("fig3-2", bp_set, "test_success", reps=budget.bootstrap_reps))
 
 # %% [markdown]

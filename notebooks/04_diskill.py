@@ -140,45 +140,11 @@ display(claims_overview(["fig4-3b", "fig4-3c", "fig4-4a"], budget, Path(vslbook.
 # logarithms inside the entropy and the KL, $\log\pi(\theta\mid c)$ and $\log\pi(c)$, each contain a
 # sum over all experts, so in this form no expert can be improved on its own.
 #
-# **From Eq. 4.3 to Eq. B.1, step by step.**
-#
-# *Step 1: one expectation.* Write the entropy and the KL as expectations of logarithms. The KL
-# term does not depend on $\theta$, so it can be averaged over $\pi(\theta\mid c)$ as well:
-#
-# $$
-# J=\mathbb E_{\pi(c)\,\pi(\theta|c)}\big[R(c,\theta)-\alpha\log\pi(\theta\mid c)-\beta\log\pi(c)+\beta\log p(c)\big].
-# $$
-#
-# *Step 2: the joint distribution is a mixture.* Multiplying Eq. 4.2 by $\pi(c)$ cancels its
-# denominator, $\pi(c)\,\pi(\theta\mid c)=\sum_o\pi(o)\,\pi(c\mid o)\,\pi(\theta\mid c,o)$, so for any
-# function $f$
-#
-# $$
-# \mathbb E_{\pi(c)\pi(\theta|c)}[f]=\sum_o\pi(o)\,\mathbb E_{\pi(c|o)}\,\mathbb E_{\pi(\theta|c,o)}[f].
-# $$
-#
-# *Step 3: Bayes' rule for each expert.* Take the two responsibilities
-# $\pi(o\mid c,\theta)=\pi(\theta\mid c,o)\,\pi(o\mid c)/\pi(\theta\mid c)$ and
-# $\pi(o\mid c)=\pi(c\mid o)\,\pi(o)/\pi(c)$ and solve each for the mixture density. For *every* $o$,
-#
-# $$
-# \log\pi(\theta\mid c)=\log\pi(\theta\mid c,o)+\log\pi(o\mid c)-\log\pi(o\mid c,\theta),\qquad
-# \log\pi(c)=\log\pi(c\mid o)+\log\pi(o)-\log\pi(o\mid c).
-# $$
-#
-# *Step 4: substitute inside the $o$-th term.* This is allowed because both identities hold for
-# that same $o$:
-#
-# $$
-# \begin{aligned}
-# J=\sum_o\pi(o)\,\mathbb E_{\pi(c|o)}\,\mathbb E_{\pi(\theta|c,o)}\Big[&R-\alpha\log\pi(\theta\mid c,o)+\alpha\log\pi(o\mid c,\theta)\\
-# &-\beta\log\pi(c\mid o)-\beta\log\pi(o)+(\beta-\alpha)\log\pi(o\mid c)+\beta\log p(c)\Big].
-# \end{aligned}
-# $$
-#
-# *Step 5: name the entropies.* Averaged over its own distribution, $-\log\pi(\theta\mid c,o)$ is
-# the entropy of the expert, $-\log\pi(c\mid o)$ the entropy of its curriculum, and $-\log\pi(o)$
-# the entropy of the prior:
+# **The decomposition (Eq. B.1).** Chapter 3 rewrites this objective step by step
+# ([Chapter 3, §1](#eq-A-2)): write $J$ as one expectation over the mixture, substitute Bayes'
+# rule for the two responsibilities inside the $o$-th term, and name the entropies of the
+# single layers. Nothing in those steps depends on what the experts, the curricula or the
+# prior are, so Eq. 4.3 decomposes in the same way:
 #
 # (eq-B-1)=
 # $$
@@ -188,8 +154,8 @@ display(claims_overview(["fig4-3b", "fig4-3c", "fig4-4a"], budget, Path(vslbook.
 # \end{aligned} \tag{B.1}
 # $$
 #
-# Term for term, this is the decomposition of Chapter 3 ([Eq. 3.4](#eq-3-4)). In Di-SkilL two
-# of its terms are constants. The fixed uniform prior gives $\beta\mathcal H[\pi(o)]=\beta\log K$.
+# This is [Eq. 3.4](#eq-3-4) of Chapter 3. What differs is that in Di-SkilL two of its terms
+# are constants. The fixed uniform prior gives $\beta\mathcal H[\pi(o)]=\beta\log K$.
 # For a uniform $p(c)$ on a region of volume $V$, $\beta\,\mathbb E[\log p(c)]=-\beta\log V$, because an
 # energy-based $\pi(c\mid o)$ puts no mass outside that region. What couples the experts is
 # now entirely contained in the two responsibilities.
@@ -219,28 +185,17 @@ plt.show()
 # %% [markdown]
 # ## 2. Variational responsibilities and the two lower bounds (Eqs. 4.4, 4.5)
 #
-# **Replacing the responsibilities with auxiliaries.** In Eq. B.1, replace $\pi(o\mid c,\theta)$
-# and $\pi(o\mid c)$ by arbitrary distributions over the experts, $\tilde\pi(o\mid c,\theta)$ and
-# $\tilde\pi(o\mid c)$, and call the result $\mathcal L(\pi;\tilde\pi)$. The difference is
-#
-# $$
-# J-\mathcal L=\alpha\sum_o\pi(o)\,\mathbb E_{\pi(c|o)\pi(\theta|c,o)}\Big[\log\frac{\pi(o\mid c,\theta)}{\tilde\pi(o\mid c,\theta)}\Big]
-# +(\beta-\alpha)\sum_o\pi(o)\,\mathbb E_{\pi(c|o)}\Big[\log\frac{\pi(o\mid c)}{\tilde\pi(o\mid c)}\Big].
-# $$
-#
-# Now run step 2 of Section 1 backwards. Since
-# $\pi(o)\pi(c\mid o)\pi(\theta\mid c,o)=\pi(c)\pi(\theta\mid c)\,\pi(o\mid c,\theta)$ and
-# $\pi(o)\pi(c\mid o)=\pi(c)\,\pi(o\mid c)$, each sum over $o$ is an average under the true
-# responsibilities, that is, a KL divergence:
+# **Auxiliary responsibilities.** Replacing $\pi(o\mid c,\theta)$ and $\pi(o\mid c)$ in Eq. B.1 by
+# arbitrary distributions $\tilde\pi$ over the experts gives the function $\mathcal L(\pi;\tilde\pi)$ of
+# Chapter 3, and the identity derived there ([Chapter 3, §2, Eq. A.4](#eq-A-4)) holds unchanged:
 #
 # $$
 # J=\mathcal L(\pi;\tilde\pi)+\alpha\,\mathbb E_{\pi(c)\pi(\theta|c)}\big[\mathrm{KL}(\pi(o\mid c,\theta)\,\|\,\tilde\pi(o\mid c,\theta))\big]
 # +(\beta-\alpha)\,\mathbb E_{\pi(c)}\big[\mathrm{KL}(\pi(o\mid c)\,\|\,\tilde\pi(o\mid c))\big].
 # $$
 #
-# This is the identity of [Eq. A.4](#eq-A-4). When $\beta\ge\alpha$ both gaps are
-# non-negative, so $\mathcal L\le J$ for every choice of $\tilde\pi$, and the two are equal when
-# $\tilde\pi$ is the model's own responsibility.
+# When $\beta\ge\alpha$ both gaps are non-negative, so $\mathcal L\le J$ for every choice of
+# $\tilde\pi$, and the two are equal when $\tilde\pi$ is the model's own responsibility.
 #
 # **The closed-form auxiliaries (Appendix B.1).** At every iteration $\tilde\pi$ is set to the
 # responsibilities of the model *before* the update, computed with Bayes' rule:
@@ -260,7 +215,8 @@ plt.show()
 #
 # **One problem per expert.** With $\tilde\pi$ fixed, $\mathcal L$ is a sum over the experts with
 # weights $\pi(o)=1/K$, and within each summand the expert and its curriculum appear in
-# separate terms. The terms that contain $\pi(\theta\mid c,o)$ make up the expert's objective
+# separate terms. The terms that contain $\pi(\theta\mid c,o)$ make up the expert's objective,
+# Chapter 3's [Eq. 3.5](#eq-3-5) for a deep expert,
 #
 # (eq-4-4)=
 # $$
@@ -270,7 +226,8 @@ plt.show()
 #
 # This is a maximum-entropy RL problem. Its reward is raised where this expert is the one
 # that explains $(c,\theta)$ and lowered where another expert already does. The terms that
-# contain $\pi(c\mid o)$ make up the curriculum's objective
+# contain $\pi(c\mid o)$ make up the curriculum's objective, Chapter 3's [Eq. 3.6](#eq-3-6)
+# for an energy-based curriculum,
 #
 # (eq-4-5)=
 # $$
@@ -289,23 +246,15 @@ plt.show()
 # (or 4.5); and $J$ improves by at least as much as the bound.
 
 # %% tags=["full-width"]
+from vslbook.bounds.path_plot import plot_path
+
 exp_report = show(D.check_expert_bound(seed=0))
 ctx_report = show(D.check_context_bound(seed=0))
 
-
-def plot_path(ax, report, what):
-    d = report.data
-    ax.plot(d["t"], d["path_objective"], "-", color="k", label="objective J (Eq. 4.3)")
-    ax.plot(d["t"], d["path_bound"], "--", color=method_color("ours"), label="bound, π̃ = old model")
-    ax.axvline(0.0, color="#999999", lw=0.8)
-    ax.set(xlabel=f"step along a random perturbation of {what}", ylabel="value")
-    ax.legend(fontsize=8)
-
-
 fig, axes = panel_grid(3, panel=(5.2, 3.4))
-plot_path(axes[0], exp_report, "one expert")
+plot_path(axes[0], exp_report, "one expert", objective="Eq. 4.3")
 axes[0].set_title("Eq. 4.4: the bound touches J at the old model")
-plot_path(axes[1], ctx_report, "one energy φ_o")
+plot_path(axes[1], ctx_report, "one energy φ_o", objective="Eq. 4.3")
 axes[1].set_title("Eq. 4.5: the same for a curriculum")
 for report, what in ((exp_report, "expert"), (ctx_report, "energy φ_o")):
     gap = report.data["path_objective"] - report.data["path_bound"]
@@ -413,42 +362,22 @@ print(
 # asserts that no drawn context lies outside the disk, and it reports how much mass a
 # Gaussian with the same mean and covariance would put outside.
 
-# %% tags=["full-width"]
+# %%
+from vslbook.bounds import diskill_disk as DD
+from vslbook.bounds.diskill_disk import RADIUS
+from vslbook.bounds.diskill_disk import two_mode_energy as phi
 from vslbook.envs.robot import make_task
 
 reacher = make_task("reacher5")
 rng = np.random.default_rng(4)
 c_env = reacher.sample_contexts(5000, rng)  # N "environment resets" (Table B.3: 5000)
-RADIUS = 0.5
-
-
-def phi(c):
-    """A two-mode example energy; defined everywhere, also outside the disk."""
-    c = np.asarray(c, dtype=float)
-    edge = 3.0 * np.exp(-np.sum((c - [0.42, 0.28]) ** 2, axis=-1) / (2 * 0.12**2))
-    inner = 2.0 * np.exp(-np.sum((c - [-0.22, -0.25]) ** 2, axis=-1) / (2 * 0.1**2))
-    return edge + inner - 1.0 * c[..., 1]
-
-
 log_q = log_softmax(phi(c_env))  # the categorical over the batch, Eq. 4.6 with Z^
 q = np.exp(log_q)
 drawn = c_env[rng.choice(len(c_env), size=400, p=q)]  # 400 draws with replacement
 
-
-def polar_integral(f, t_low, t_high, n=128):
-    """int f over the sector {r <= RADIUS, t_low <= t <= t_high}, Gauss-Legendre in r and t."""
-    x, w = np.polynomial.legendre.leggauss(n)
-    r, wr = 0.5 * RADIUS * (x + 1), 0.5 * RADIUS * w
-    t, wt = t_low + 0.5 * (t_high - t_low) * (x + 1), 0.5 * (t_high - t_low) * w
-    rr, tt = np.meshgrid(r, t, indexing="ij")
-    pts = np.stack([rr * np.cos(tt), rr * np.sin(tt)], axis=-1)
-    return float(np.sum(wr[:, None] * wt[None, :] * rr * f(pts)))
-
-
 upper = c_env[:, 1] > 0
-mass_categorical = float(q @ upper)
-se = float(np.sqrt(np.sum(q**2 * (upper - mass_categorical) ** 2)))
-mass_exact = polar_integral(lambda p: np.exp(phi(p)), 0.0, np.pi) / polar_integral(
+mass_categorical, se = DD.categorical_mass(q, upper)
+mass_exact = DD.polar_integral(lambda p: np.exp(phi(p)), 0.0, np.pi) / DD.polar_integral(
     lambda p: np.exp(phi(p)), 0.0, 2 * np.pi
 )
 print(
@@ -460,14 +389,23 @@ outside = np.linalg.norm(drawn, axis=1) > RADIUS
 print(f"drawn contexts outside the disk: {outside.sum()} of {len(drawn)}")
 assert not outside.any()
 
-g_mean = q @ c_env  # a Gaussian with the categorical's mean and covariance
-g_cov = (c_env - g_mean).T @ ((c_env - g_mean) * q[:, None])
+# %% [markdown]
+# A Gaussian curriculum with the same mean and covariance, for comparison:
+
+# %%
+g_mean, g_cov = DD.moment_matched_gaussian(q, c_env)  # a Gaussian with the categorical's moments
 g_draws = rng.multivariate_normal(g_mean, g_cov, 100_000)
 print(
     f"a Gaussian with the same mean and covariance puts "
     f"{np.mean(np.linalg.norm(g_draws, axis=1) > RADIUS):.1%} of its draws outside the disk"
 )
 
+# %% [markdown]
+# Left: the energy, smooth and defined everywhere. Right: the environment's resets, the
+# contexts drawn from the categorical, and the moment-matched Gaussian, whose 2σ ellipse
+# crosses the edge of the disk.
+
+# %% tags=["full-width"]
 grid = np.linspace(-0.65, 0.65, 161)
 gx, gy = np.meshgrid(grid, grid)
 ring = np.linspace(0, 2 * np.pi, 200)
@@ -591,21 +529,15 @@ plt.show()
 # %%
 from torch.distributions import MultivariateNormal, kl_divergence
 
+from vslbook.bounds import diskill_projection as TR
 from vslbook.erl import trpl
 
 torch.manual_seed(0)
 K, B, dim = 4, 8, 3
 eps_mean, eps_cov = 0.05, 0.005  # ε_μ, ε_Σ of Table B.2
 f64 = {"dtype": torch.float64}
-
-
-def random_chol(*batch, spread):
-    a = torch.randn(*batch, dim, dim, **f64) * spread
-    return torch.tril(a, -1) + torch.diag_embed(torch.exp(torch.diagonal(a, dim1=-2, dim2=-1)))
-
-
 old_mean = torch.randn(K, B, dim, **f64)
-old_chol = random_chol(K, spread=0.5)
+old_chol = TR.random_chol(K, dim=dim, spread=0.5)
 mean_step = torch.tensor([1.0, 1.0, 1.0, 0.02], **f64).view(K, 1, 1)
 cov_step = torch.tensor([0.5, 0.5, 0.01, 0.01], **f64).view(K, 1, 1)
 mean = old_mean + mean_step * torch.randn(K, B, dim, **f64)
@@ -615,7 +547,11 @@ chol = torch.tril(chol, -1) + torch.diag_embed(torch.diagonal(chol, dim1=-2, dim
 m_before, c_before = trpl.kl_parts(mean, chol, old_mean, old_chol)
 p_mean, p_chol = trpl.project(mean, chol, old_mean, old_chol, eps_mean, eps_cov)
 
+# %% [markdown]
+# The KL parts after the projection, from `torch.distributions`, where the bounds were
+# violated and where they were not:
 
+# %%
 def mvn(mu, scale_tril):
     return MultivariateNormal(mu, scale_tril=scale_tril)
 
@@ -659,22 +595,7 @@ assert torch.equal(p_mean[~hit_m], mean[~hit_m]) and torch.equal(p_chol[~hit_c],
 # out in numpy. Finally, central differences of $g$ are compared with
 # $\epsilon_\Sigma-C(\tilde\Sigma(\eta))$ at three values of $\eta$.
 
-# %% tags=["full-width"]
-from scipy.optimize import minimize, minimize_scalar
-
-
-def gauss_kl(mu1, S1, mu2, S2):
-    """KL(N(mu1, S1) || N(mu2, S2)), the textbook formula in numpy."""
-    diff = mu2 - mu1
-    return 0.5 * (
-        np.trace(np.linalg.solve(S2, S1))
-        + diff @ np.linalg.solve(S2, diff)
-        - len(mu1)
-        + np.linalg.slogdet(S2)[1]
-        - np.linalg.slogdet(S1)[1]
-    )
-
-
+# %%
 mu_o2, mu2 = np.zeros(2), np.array([0.9, -0.5])
 S_o2 = np.array([[0.5, 0.2], [0.2, 0.3]])
 S2 = np.array([[0.15, -0.05], [-0.05, 0.6]])
@@ -684,77 +605,29 @@ p_mu2 = trpl.project_mean(torch.tensor(mu2), torch.tensor(mu_o2), L_o2, eps_m2).
 p_L2 = trpl.project_cov(L2, L_o2, eps_c2).numpy()
 p_S2 = p_L2 @ p_L2.T
 
-P_o2, P2 = np.linalg.inv(S_o2), np.linalg.inv(S2)
-brute_mu = minimize(
-    lambda x: (x - mu2) @ P_o2 @ (x - mu2),
-    mu_o2,
-    method="SLSQP",
-    options={"ftol": 1e-15},
-    constraints=[
-        {"type": "ineq", "fun": lambda x: eps_m2 - 0.5 * (x - mu_o2) @ P_o2 @ (x - mu_o2)}
-    ],
-).x
-
-
-def cov_of(x):
-    """A 2x2 covariance from a Cholesky factor with log-diagonal x[0], x[2] and x[1] below."""
-    L = np.array([[np.exp(x[0]), 0.0], [x[1], np.exp(x[2])]])
-    return L @ L.T
-
-
+brute_mu = TR.slsqp_mean_projection(mu2, mu_o2, S_o2, eps_m2)
+brute_cov = TR.slsqp_cov_projection(S2, S_o2, eps_c2)
 z2 = np.zeros(2)
-start = np.linalg.cholesky(S_o2)  # Σ_o is feasible (C = 0)
-x0 = [np.log(start[0, 0]), start[1, 0], np.log(start[1, 1])]
-for _ in range(5):  # restarted from its own answer: at ftol 1e-15 its line search can stop short
-    brute_cov = minimize(
-        lambda x: gauss_kl(z2, cov_of(x), z2, S2),
-        x0,
-        method="SLSQP",
-        constraints=[{"type": "ineq", "fun": lambda x: eps_c2 - gauss_kl(z2, cov_of(x), z2, S_o2)}],
-        options={"ftol": 1e-15, "maxiter": 500},
-    )
-    x0 = brute_cov.x
-    if brute_cov.success:
-        break
 # a feasible point with no descent direction left (status 8) is an optimum to this precision
 assert brute_cov.success or brute_cov.status == 8, brute_cov.message
-assert eps_c2 - gauss_kl(z2, cov_of(brute_cov.x), z2, S_o2) >= -1e-10
-kl_layer, kl_brute = gauss_kl(z2, p_S2, z2, S2), gauss_kl(z2, cov_of(brute_cov.x), z2, S2)
+assert eps_c2 - TR.gauss_kl(z2, TR.cov_of(brute_cov.x), z2, S_o2) >= -1e-10
+kl_layer, kl_brute = TR.gauss_kl(z2, p_S2, z2, S2), TR.gauss_kl(z2, TR.cov_of(brute_cov.x), z2, S2)
 print(f"mean: layer {p_mu2}, SLSQP {brute_mu}")
 print(
     f"covariance: KL(Σ̃ ‖ Σ) layer {kl_layer:.10f}, SLSQP {kl_brute:.10f}; "
-    f"C(Σ̃) = {gauss_kl(z2, p_S2, z2, S_o2):.10f}"
+    f"C(Σ̃) = {TR.gauss_kl(z2, p_S2, z2, S_o2):.10f}"
 )
 assert np.abs(p_mu2 - brute_mu).max() < 1e-6
 assert abs(kl_layer - kl_brute) < 1e-8 and kl_layer <= kl_brute + 1e-10
-assert np.abs(p_S2 - cov_of(brute_cov.x)).max() < 1e-4
+assert np.abs(p_S2 - TR.cov_of(brute_cov.x)).max() < 1e-4
 
-# the layer's Σ̃ on the path:  Σ̃⁻¹ − Σ⁻¹ = η (Σ_o⁻¹ − Σ̃⁻¹)
-P_t2 = np.linalg.inv(p_S2)
-a_vec, b_vec = (P_t2 - P2).ravel(), (P_o2 - P_t2).ravel()
-eta_layer = a_vec @ b_vec / (b_vec @ b_vec)
-off_path = np.linalg.norm(a_vec - eta_layer * b_vec) / np.linalg.norm(a_vec)
+# %% [markdown]
+# The layer's $\tilde\Sigma$ lies on the path $\tilde\Sigma(\eta)$, at the minimiser of the dual, and
+# the dual's derivative is $\epsilon_\Sigma-C(\tilde\Sigma(\eta))$:
 
-
-def sigma_tilde(eta):
-    return (eta + 1) * np.linalg.inv(eta * P_o2 + P2)
-
-
-def dual(eta):
-    return (
-        eta * eps_c2
-        - 0.5 * eta * np.linalg.slogdet(S_o2)[1]
-        + 0.5 * (eta + 1) * np.linalg.slogdet(sigma_tilde(eta))[1]
-    )
-
-
-eta_dual = float(
-    np.exp(
-        minimize_scalar(
-            lambda t: dual(np.exp(t)), bounds=(-15, 15), method="bounded", options={"xatol": 1e-12}
-        ).x
-    )
-)
+# %%
+eta_layer, off_path = TR.eta_on_path(p_S2, S2, S_o2)  # Σ̃⁻¹ − Σ⁻¹ = η (Σ_o⁻¹ − Σ̃⁻¹)
+eta_dual = TR.dual_minimiser(S2, S_o2, eps_c2)
 print(
     f"η* read off the layer's Σ̃: {eta_layer:.8f} (relative distance from the path "
     f"{off_path:.1e}); argmin of the dual g: {eta_dual:.8f}"
@@ -762,11 +635,16 @@ print(
 assert off_path < 1e-10 and abs(eta_layer - eta_dual) < 1e-6 * (1 + eta_dual)
 for eta in (0.1 * eta_dual, eta_dual, 10 * eta_dual):
     h = 1e-6 * eta
-    fd = (dual(eta + h) - dual(eta - h)) / (2 * h)
-    exact = eps_c2 - gauss_kl(z2, sigma_tilde(eta), z2, S_o2)
+    fd = (TR.cov_dual(eta + h, S2, S_o2, eps_c2) - TR.cov_dual(eta - h, S2, S_o2, eps_c2)) / (2 * h)
+    exact = eps_c2 - TR.gauss_kl(z2, TR.sigma_tilde(eta, S2, S_o2), z2, S_o2)
     print(f"η = {eta:8.4f}: g'(η) by central differences {fd:+.8f}, ε_Σ − C(Σ̃(η)) {exact:+.8f}")
     assert abs(fd - exact) < 1e-6
 
+# %% [markdown]
+# Both projections in a picture: the mean moves along the segment to the border of its
+# region, the covariance along the path $\tilde\Sigma(\eta)$ between proposal and old covariance.
+
+# %% tags=["full-width"]
 ring = np.linspace(0, 2 * np.pi, 200)
 circle = np.stack([np.cos(ring), np.sin(ring)])
 fig, axes = plt.subplots(1, 2, figsize=(10, 4))
@@ -779,7 +657,7 @@ axes[0].plot(*p_mu2, "*", ms=12, color=method_color("ours"), label=r"projection 
 axes[0].set(aspect="equal", title=r"mean: the segment $\mu_o\to\mu$ meets the border")
 axes[0].legend(fontsize=8)
 for eta in np.geomspace(0.02, 50, 9):
-    axes[1].plot(*(np.linalg.cholesky(sigma_tilde(eta)) @ circle), color="#cccccc", lw=0.8)
+    axes[1].plot(*(np.linalg.cholesky(TR.sigma_tilde(eta, S2, S_o2)) @ circle), color="#cccccc", lw=0.8)
 axes[1].plot(
     *(np.linalg.cholesky(S2) @ circle), color="#999999", lw=2, label=r"proposal $\Sigma$ ($\eta=0$)"
 )
@@ -809,13 +687,8 @@ plt.show()
 tri = torch.tril_indices(2, 2)
 
 
-def factor(v):
-    """The 2x2 lower-triangular matrix with free entries v (row-major)."""
-    return torch.zeros(2, 2, **f64).index_put((tri[0], tri[1]), v)
-
-
 def projected(v, v_old):
-    return trpl.project_cov(factor(v), factor(v_old), eps_c2)
+    return trpl.project_cov(TR.tril_from_free(v), TR.tril_from_free(v_old), eps_c2)
 
 
 v = L2[tri[0], tri[1]].clone().requires_grad_(True)
@@ -1170,6 +1043,11 @@ fig.tight_layout()
 save_figure(fig, "fig-4-2-reacher")
 plt.show()
 
+# %% [markdown]
+# The same model in numbers: how many experts own a part of the disk, how many are active per
+# goal, and which experts the gating picks at the goals of panel (c).
+
+# %%
 pref = RF.log_preference(model, grid)
 active = RF.active_experts(model, grid)
 owners = np.unique(pref.argmax(0))
@@ -1237,21 +1115,15 @@ fig.tight_layout()
 save_figure(fig, "fig-4-3c-4-4-curves")
 plt.show()
 
+# %% [markdown]
 # Each run's last evaluation, IQM [95 % CI] over seeds, and the thesis's orderings at the
 # end of training (ours at this budget's counts; only 5LR is meant to show it at reduced).
 # An iteration's median wall time (sampling the episodes and the updates, one core each
 # where runs share the machine) is in parentheses. Where the figure's measure is the
 # success rate, the final test return follows: it moves long before the first success.
-def verdict(as_in_thesis):
-    if as_in_thesis is None:
-        return "tied (equal IQMs)"
-    return "as in the thesis" if as_in_thesis else "NOT as in the thesis"
 
-
-def score_line(r, with_time=True):
-    time = "" if not with_time or np.isnan(r.s_per_iteration) else f" ({r.s_per_iteration:.2g} s/it.)"
-    return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}"
-
+# %%
+from vslbook.experiments.diskill_scores import score_line, verdict
 
 for figure, (scores, verdicts) in finals.items():
     print(f"Fig. {figure} ({DR.METRIC[figure]}): " + "; ".join(

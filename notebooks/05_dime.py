@@ -61,6 +61,10 @@ from vslbook.plots import (
 from vslbook.srl.dime_config import DIMEConfig, describe_differences, named_config
 from vslbook.stats import iqm_curve
 
+# %% [markdown]
+# The budget of the live cells, and where their runs and tables live:
+
+# %%
 budget = get_budget()
 use_style()
 ROOT = Path(vslbook.__file__).resolve().parents[1]
@@ -369,20 +373,19 @@ plt.show()
 # the other side from the means and covariances of both joints.
 
 # %%
+from vslbook.bounds.gaussian_chains import log_normal
+from vslbook.bounds.toy_numerics import mc_mean_stderr
+
+
+def stderr(x):  # the Monte Carlo standard error of the mean of the samples x
+    return mc_mean_stderr(x)[1]
+
+
+# %%
 sigma0, slope, offset = 1.5, -0.8, 1.5
 etas = np.array([0.4, 0.3, 0.2])  # library step sizes η_n = σ0² β_n δ, sampling order a^3 -> a^0
 n_mc = 200_000
 rng = np.random.default_rng(0)
-
-
-def log_normal(x, mean, var):
-    return -0.5 * ((x - mean) ** 2 / var + np.log(2 * np.pi * var))
-
-
-def stderr(x):
-    return x.std(ddof=1) / np.sqrt(x.size)
-
-
 a = sigma0 * rng.standard_normal(n_mc)  # a^N ~ π̃_N = N(0, σ0²)
 log_ratio = -log_normal(a, 0.0, sigma0**2)  # running sum of the log ratio in Eq. 5.15
 mean, var = 0.0, sigma0**2  # moments of the current a^n
@@ -783,6 +786,7 @@ assert kl_marginal <= rhs_c11  # Eq. 5.20
 #    by the value iteration above, and its Q dominates that of 300 random members.
 
 # %%
+from vslbook.bounds.dime_one_step_mdp import OneStepDiffusionMDP
 from vslbook.bounds.foundations import random_mdp
 
 n_s, n_a, n_z = 6, 3, 4  # states, actions a^0, noise values a^1
@@ -792,35 +796,13 @@ rng = np.random.default_rng(1)
 prior = np.full(n_z, 1 / n_z)  # π̃_1(z): fixed, the role of N(0, σ0²)
 noising = rng.dirichlet(np.ones(n_z), size=n_a)  # π⃗_{1|0}(z | a), row a: fixed, the OU step
 
-
-def marginal(kernel):  # kernel[s, z, a] = π̃_{0|1}(a | z, s);  returns π̃_0(a | s)
-    return np.einsum("z,sza->sa", prior, kernel)
-
-
-def bound(kernel):  # ℓ(s), Eq. 5.15 with N = 1, by enumeration
-    log_ratio = np.log(noising.T)[None] - np.log(prior)[None, :, None] - np.log(kernel)
-    return np.einsum("z,sza,sza->s", prior, kernel, log_ratio)
-
-
-def evaluate(kernel):  # Eq. 5.17 by one linear solve: Q = R + γ P W, W = E_π̃0[Q] + α ℓ
-    pi = marginal(kernel)
-    p_pi = np.einsum("sa,sat->st", pi, P)
-    w = np.linalg.solve(np.eye(n_s) - gamma * p_pi, (pi * R).sum(1) + alpha * bound(kernel))
-    return R + gamma * P @ w
-
-
-def soft_value(kernel, q):  # E_π̃0[Q(s, a)] + α ℓ(s): both sides of Eq. C.20
-    return (marginal(kernel) * q).sum(1) + alpha * bound(kernel)
-
-
-def improve(q):  # Eq. 5.22 in closed form: π̃(a | z, s) ∝ exp(Q(s, a) / α) π⃗(z | a)
-    logits = q[:, None, :] / alpha + np.log(noising.T)[None]
-    weights = np.exp(logits - logits.max(-1, keepdims=True))
-    return weights / weights.sum(-1, keepdims=True)
+mdp = OneStepDiffusionMDP(P, R, prior, noising, gamma, alpha)  # Eqs. 5.15, 5.17, 5.22, C.20
+marginal, bound, evaluate, soft_value, improve = (
+    mdp.marginal, mdp.bound, mdp.evaluate, mdp.soft_value, mdp.improve)  # fmt: skip
 
 
 def random_kernel():
-    return rng.dirichlet(np.ones(n_a), size=(n_s, n_z))
+    return mdp.random_kernel(rng)
 
 
 kernel = random_kernel()
@@ -1090,6 +1072,11 @@ r, done = batch.reward.numpy(), batch.terminated.numpy()
 y = r + cfg.gamma * (1 - done) * (q_next.mean(0) + alpha_now * ell_hat)
 critic_by_hand = sum(0.5 * np.mean((q_now[k] - y) ** 2) for k in range(2))
 
+# %% [markdown]
+# The actor's and the temperature's losses on the same batch, and all three against the
+# package:
+
+# %%
 # actor, Eq. 5.27 with α written out
 policy, critic = copy.deepcopy(agent.policy), copy.deepcopy(agent.critic)
 torch.manual_seed(8)
@@ -1262,6 +1249,11 @@ print(fs_abl.caption())
 rows_all = abl.curve_rows()
 curves = {label: iqm_curve(rows_all[rows_all.variant == label], x="step", y="value", run="run",
                            reps=budget.bootstrap_reps) for label in variants}
+
+# %% [markdown]
+# Each switch against DIME, one panel each, and the learned $\beta_0$ of Fig. C.2:
+
+# %% tags=["full-width"]
 panels = [("Fig. 5.2c–d: diffusion steps", "2 steps"), ("Fig. 5.4a–b: fixed α", "fixed α = 0.1"),
           ("Fig. 5.4c–d: Gaussian policy", "Gaussian"), ("Figs. 5.5/5.6: distr. Q", "no distr. Q"),
           ("Fig. 5.8a–b: general bridges", "GB"), ("Fig. C.2: learned β", "fixed β"),
@@ -1291,6 +1283,11 @@ fig.tight_layout()
 fig.text(0.01, 0.0, abl.captions(), fontsize=7.5, va="top")  # under the panels
 save_figure(fig, f"ch5-ablations-pendulum-{budget.name}")
 plt.show()
+
+# %% [markdown]
+# The final evaluation return of every run, per variant:
+
+# %%
 final = rows_all.sort_values("step").groupby(["variant", "run"]).value.last()
 print(final.groupby("variant").agg(["mean", "min", "max", "count"]).round(1).to_string())
 
@@ -1312,19 +1309,17 @@ pm_variants = RUN_SETS["pointmass"].variants
 fs_pm, pm = chapter5_figure("fig5-7", RUNS, TABLES)
 print(fs_pm.caption())
 pm_steps = figure_runs("fig5-7", fs_pm.budget)[0].length  # env steps of the runs drawn
-fig, axes = panel_grid(len(alphas), panel=(5.2, 4.6))
 grid = np.stack(np.meshgrid(np.linspace(-1, 1, 50), np.linspace(-1, 1, 50)), -1).reshape(-1, 2)
-summary = {}
-for ax, label in zip(axes, pm_variants, strict=True):
+values, paths, reached = {}, {}, {}
+for label in pm_variants:
     agent, env = load_agent(pm.runs[label][0])
     torch.manual_seed(0)  # the policy's noise: the same rollouts every time
     with torch.no_grad():
         obs = torch.as_tensor(np.repeat(grid, 15, 0), dtype=torch.float32)
         acts = agent.policy.sample(obs).action
         q = agent.support.mean(torch.softmax(agent.critic(obs, acts), -1)).mean(0)
-        value = q.reshape(-1, 15).mean(1).reshape(50, 50).numpy()
-    ax.imshow(value, origin="lower", extent=(-1, 1, -1, 1), cmap="viridis")
-    reached = []
+        values[label] = q.reshape(-1, 15).mean(1).reshape(50, 50).numpy()
+    paths[label], reached[label] = [], []
     for episode in range(50):
         o, _ = env.reset(seed=episode)
         path, done, info = [o], False, {}
@@ -1334,10 +1329,21 @@ for ax, label in zip(axes, pm_variants, strict=True):
             o, _, term, trunc, info = env.step(a)
             path.append(o)
             done = term or trunc
-        reached.append(info.get("goal", -1))
-        ax.plot(*np.array(path).T, color="w", lw=0.6, alpha=0.6)
+        reached[label].append(info.get("goal", -1))
+        paths[label].append(np.array(path))
+
+# %% [markdown]
+# The value maps with the 50 rollouts of each agent, and where the rollouts end:
+
+# %% tags=["full-width"]
+fig, axes = panel_grid(len(alphas), panel=(5.2, 4.6))
+summary = {}
+for ax, label in zip(axes, pm_variants, strict=True):
+    ax.imshow(values[label], origin="lower", extent=(-1, 1, -1, 1), cmap="viridis")
+    for path in paths[label]:
+        ax.plot(*path.T, color="w", lw=0.6, alpha=0.6)
     ax.plot(*GOALS.T, "o", color="red", ms=8)
-    counts = np.bincount(np.array(reached) + 1, minlength=len(GOALS) + 1)
+    counts = np.bincount(np.array(reached[label]) + 1, minlength=len(GOALS) + 1)
     summary[label] = {"no goal": counts[0], **{f"goal {g}": counts[g + 1] for g in range(len(GOALS))}}
     modes = [g for g in range(len(GOALS)) if counts[g + 1]]
     ax.set(title=f"{label}: goals reached: {', '.join(map(str, modes)) or 'none'}",
@@ -1481,21 +1487,11 @@ print(fs_pm.verdict(f"thesis: the larger α, the more goals reached (Fig. 5.7a-f
 # closed form and the single-chain values with the package's estimator.
 
 # %%
+from vslbook.bounds import dime_bridge_example as BX
+
 beta_gb, delta_gb, n_gb, n_mc = 1.0, 0.25, 3, 100_000
 
-
-def f_gb(a, n):
-    return -0.5 * a  # reference drift
-
-
-def u_gb(a, n):
-    return 0.4 * a + 0.2  # forward control
-
-
-def v_gb(a, n):
-    return -1.2 * a + 0.1 * n  # backward control
-
-
+f_gb, u_gb, v_gb = BX.reference_drift, BX.forward_control, BX.backward_control
 mu_q, s_q = 0.5, 0.7  # Q(a) = -(a - μ)² / (2 s²): the target of Eq. 5.38 is N(μ, s²)
 var_k = 2 * beta_gb * delta_gb  # variance of the kernels of Eqs. 5.35-5.36
 rng = np.random.default_rng(1)
@@ -1515,10 +1511,7 @@ bridge = D.make_bridge(f_gb, u_gb, v_gb, beta_gb, delta_gb, n_gb, 1)  # package
 cf_gb = D.linear_bridge_closed_form(bridge, [mu_q], [[s_q**2]])
 traj = np.stack(path[::-1])[:, :, None]  # traj[n] = a^n
 
-
-def q_gb(a):
-    return -((a[:, 0] - mu_q) ** 2) / (2 * s_q**2)
-
+q_gb = BX.gaussian_target_q(mu_q, s_q)
 
 same = np.abs(D.bridge_kl_samples(bridge, traj, q_gb, log_z_q) - kl_gb).max()
 print(f"Eq. 5.37 Monte Carlo {kl_gb.mean():.4f} ± {stderr(kl_gb):.4f}   closed form {cf_gb.kl:.4f}")

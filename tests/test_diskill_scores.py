@@ -1,0 +1,21 @@
+from types import SimpleNamespace
+
+from vslbook.experiments.diskill_scores import score_line, verdict
+
+
+def row(**kw):
+    base = {"label": "Di-SkilL", "iqm": 0.123456, "ci_low": 0.1, "ci_high": 0.2,
+            "s_per_iteration": 1.234}  # fmt: skip
+    return SimpleNamespace(**{**base, **kw})
+
+
+def test_verdict_words():
+    assert verdict(True) == "as in the thesis"
+    assert verdict(False) == "NOT as in the thesis"
+    assert verdict(None) == "tied (equal IQMs)"
+
+
+def test_score_line_with_and_without_time():
+    assert score_line(row()) == "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.)"
+    assert score_line(row(), with_time=False) == "Di-SkilL 0.123 [0.1, 0.2]"
+    assert score_line(row(s_per_iteration=float("nan"))) == "Di-SkilL 0.123 [0.1, 0.2]"
