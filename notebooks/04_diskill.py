@@ -1140,27 +1140,26 @@ for figure in ("4.3c", "4.4a"):
                             reps=budget.bootstrap_reps))  # fmt: skip
 
 # %% [markdown]
-# **The test return of the success tasks** (not a figure of the thesis). A success curve
-# stays at zero until the first test episode succeeds, and at `reduced` (2 % of the
-# iterations) none on box pushing, table tennis hard or mini golf does yet; their test
-# returns show how far learning got. The same runs as above; each y-axis spans the last
-# three quarters of training.
+# **The test curves taken apart** (not a figure of the thesis). A success curve stays at
+# zero until the first test episode succeeds, and the test return mixes two things: the
+# return of the θ that were executed, and the fixed penalty of those rejected before
+# simulation, which dominates early on (a rising return can mean fewer rejections, not
+# better strikes). So for each success task: the return of the executed test episodes
+# (left) and the share of test θ executed (right), from the same runs as above
+# (`vslbook.experiments.diskill_executed`).
 
 # %% tags=["full-width"]
+from vslbook.experiments.diskill_executed import draw_executed
+
 succ = [f for f in FIGS_4 if DR.METRIC[f] != "test_return"]
-fig, axes = panel_grid(len(succ), panel=(5.5, 4.0))
-for ax, figure in zip(axes, succ, strict=True):
-    ret = DR.curves(fig_runs[figure], "test_return", reps=budget.bootstrap_reps)
-    draw_learning_curves(ax, ret, ylabel="test return (IQM)", thesis=None)
-    # the y-axis spans each method's last three quarters of training: the first evaluations
-    # (untrained experts) are far below and would flatten the rest
-    later = ret[ret["samples"] >= 0.25 * ret.groupby("method")["samples"].transform("max")]
-    lo, hi = later["lo"].min(), later["hi"].max()
-    pad = 0.15 * (hi - lo) + 1e-6
-    ax.set_ylim(lo - pad, hi + pad)
-    ax.set_title(f"{DR.FIGURES[figure][0]}: test return (the runs of Fig. {figure})", fontsize=10)
+fig, axes = panel_grid(2 * len(succ), panel=(5.5, 3.8))
+for figure, ax_ret, ax_share in zip(succ, axes[::2], axes[1::2], strict=True):
+    draw_executed(ax_ret, ax_share, fig_runs[figure], reps=budget.bootstrap_reps)
+    ax_ret.set_title(f"{DR.FIGURES[figure][0]}: executed return (Fig. {figure}'s runs)",
+                     fontsize=10)  # fmt: skip
+    ax_share.set_title(f"{DR.FIGURES[figure][0]}: share executed", fontsize=10)
 fig.tight_layout()
-save_figure(fig, "fig-4-4-returns")
+save_figure(fig, "fig-4-4-executed")
 plt.show()
 
 # %% [markdown]

@@ -21,7 +21,7 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
-from vslbook.plots import LAYOUT_SUFFIX
+from vslbook.figure_files import LAYOUT_SUFFIX
 
 #: A desktop browser window. The theme caps the page at 88rem (1408 px), so a wider window
 #: does not widen the columns: with both sidebars shown the article's text, and an output,

@@ -41,6 +41,8 @@ from matplotlib.transforms import ScaledTranslation
 
 from vslbook.budget import get_budget
 from vslbook.figure_files import (
+    FIGURES_ENV_VAR,
+    LAYOUT_SUFFIX,
     figure_layout,
     figures_dir,
     save_figure,
@@ -48,7 +50,9 @@ from vslbook.figure_files import (
 
 __all__ = [
     "EXPERT_COLORS",
+    "FIGURES_ENV_VAR",
     "FIGURE_METHODS",
+    "LAYOUT_SUFFIX",
     "METHOD_ALIASES",
     "METHOD_COLORS",
     "METHOD_STYLES",
