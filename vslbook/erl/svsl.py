@@ -250,7 +250,7 @@ class SVSL:
         m.changed()
         return {"context_kl": float(np.mean(res.kl)), "context_fail": int((~ok).sum())}
 
-    def _start_weight_phase(self) -> None:
+    def start_weight_phase(self) -> None:
         """Before line 17: fresh buffers for every expert, then freeze what V(c) is trained on."""
         cfg, m = self.config, self.model
         experts = np.arange(m.n_experts)
@@ -390,7 +390,7 @@ def train(
                 metrics["deleted_local_optimum"] = float(s.delete_if_local_optimum())
         else:
             if s.weight_phase is None:
-                s._start_weight_phase()
+                s.start_weight_phase()
             metrics |= s.update_weights()  # line 17: Eq. A.7
             if t == cfg.total_iterations - 1:  # line 18
                 s.model.keep(np.exp(s.model.log_w) > cfg.delete_threshold)
