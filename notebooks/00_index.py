@@ -106,7 +106,7 @@
 # | [5.24](#eq-5-24)–[5.28](#eq-5-28) practical losses | 5 §2b | critic, actor and $\alpha$ losses of a tiny agent against the formulas computed in the cell | `test_dime_update_maths.py::test_actor_loss_and_gradient_follow_eq_5_27` |
 
 # %% [markdown]
-# ## Budgets
+# ## Budgets, and where the figures' runs come from
 #
 # One environment variable decides how much compute the book spends. Budgets scale
 # counts only (iterations, environment steps, seeds, bootstrap resamples), never an
@@ -114,30 +114,32 @@
 # that a notebook picks in plain sight.
 #
 # ```bash
-# make book                          # the site at the default budget, VSLBOOK_BUDGET=reduced
-# make book VSLBOOK_BUDGET=smoke     # every notebook in a few minutes (what CI runs)
-# VSLBOOK_BUDGET=full vslbook sweep ...   # the thesis's budgets, on a cluster
+# make book                          # figures from recorded runs (data/results/), the rest at reduced
+# make book VSLBOOK_BUDGET=smoke     # every notebook at smoke, what CI runs
+# make book RETRAIN=1                # train every run of the budget (the plan's core-hours first)
+# vslbook train fig4-3c --budget full --jobs 2   # the thesis's budget, one run per core
 # ```
 #
-# What each notebook runs, and how long its execution took on a 2-core x86_64 CPU (no
-# GPU), the machine CI runs on. At `smoke` the first number is a build that trains its runs,
-# the second one that finds them finished in `runs/`:
-#
-# | notebook | `smoke` | `reduced` |
-# |---|---|---|
-# | `00_index` (this page) | 5 s | the same |
-# | `01_tasks` | every task built, a picture of each scene; about 15 s | the same |
-# | `02_foundations` | ERL against SRL on the point-reach task at smoke counts, every check; about 35 s / 13 s | the same at 5 % of the thesis's counts, 3 seeds; 10 s from scratch, its three runs included |
-# | `03_svsl` | every SVSL figure at a few iterations, 2 seeds; 30–100 s / 29 s | Figs. 3.1 (30 of 60 experts), 3.2, 3.3, 3.5 (60 PPO updates), A.1, A.2 at reduced counts, 3 seeds: the run sets took 2 h 7 min of one core (planar reacher 23 min, beer pong 15 min, table tennis 20 min, 5-link reacher 69 min, with another job on the second core), then the notebook 30 s |
-# | `04_diskill` | every check; every Di-SkilL, BBRL, LinDi-SkilL and PPO run set at 2 iterations of 2 experts with 4 samples (PPO: one rollout, 5LR only); about 90 s on a busy machine | Fig. 4.2 / 4.3c at 10 % of the 5LR iterations (300) with its 10 experts and PPO at 5 % of its steps, the other tasks at 2 % with at most 5 experts, 3 seeds; the run sets add up to about 10.3 h of one core (two jobs on the two cores): 5LR Di-SkilL 52 min, BBRL 27 min, LinDi-SkilL 48 min, PPO about 36 min a seed; box pushing Di-SkilL 35 min, BBRL about 55 min, LinDi-SkilL about 51 min, PPO about 26 min a seed; mini golf Di-SkilL 21 min, BBRL 48 min, LinDi-SkilL about 18 min; table tennis (4 variants) 37 min; hopper jump 21 min; table tennis hard 16 min (the README has each set), then the notebook 38 s. `benchmarks/erl_run_sets.py --chapter 4` times each figure's set |
-# | `05_dime` | two DIME seeds of a few hundred steps, the ablations at smoke counts, every check; about 100 s / 39 s | cheetah-run 3 × 50k steps (`cpu-256`, the three seeds on one seed axis), eight Pendulum ablations, three point-mass runs; about 1 h 45 min from scratch on 2 cores (ablations 15 min and point mass 4 min measured, the cheetah set about 83 min from its measured update rate) |
-#
-# In all, `make book` at `reduced` from a fresh clone is a night's run on this machine: the
-# Chapter 3 and 4 run sets are about 12.4 h of one core (measured as separate jobs, two at a
-# time on the two cores; a book build runs them one after another, each set's episodes
-# spread over both cores), Chapter 5 about 1 h 45 min of both cores, the notebooks and the
-# site a few minutes. A second `make book` executes only the notebooks whose code changed
-# (an execution cache per budget) and every finished training run is reused from `runs/`.
+# The long run sets of Chapters 3–5 take hours to days of CPU, so by default a figure draws
+# the runs recorded in `data/results/` (the largest budget recorded, with their provenance)
+# or finished in `runs/`, and trains smoke runs only where neither exists; each figure
+# prints where its runs came from (`vslbook.experiments.figure_sources`). The derivations,
+# the checks and the cheap live runs always execute. How long each notebook and its run
+# sets took on a 2-core x86_64 CPU, the machine CI runs on (measured while this code was
+# written; `data/measurements/notebook_times.csv`, with its provenance):
+
+# %%
+from IPython.display import display
+
+from vslbook.data import measurements
+
+times = measurements("notebook_times.csv")
+times["wall"] = [f"{s / 3600:.1f} h" if s >= 3600 else f"{s / 60:.0f} min" if s >= 120
+                 else f"{s:.0f} s" for s in times["wall_seconds"]]  # fmt: skip
+display(times.drop(columns="wall_seconds").fillna(""))
+reduced = times[(times["budget"] == "reduced") & (times["runs"] == "trained")]
+print(f"every run set at reduced from scratch: {reduced['wall_seconds'].sum() / 3600:.1f} h of "
+      "wall time (cores as listed); the default book reads recorded runs instead")
 
 # %%
 from vslbook.budget import BUDGETS, get_budget
