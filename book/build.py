@@ -74,8 +74,10 @@ def results_fingerprint() -> str:
     """sha256 over the registries of ``data/results/`` (changes whenever a set is recorded)."""
     import hashlib
 
+    from vslbook.data import results_dir
+
     digest = hashlib.sha256()
-    results = ROOT / "data" / "results"
+    results = results_dir()
     for reg in sorted(results.rglob("registry.json")) if results.is_dir() else ():
         digest.update(str(reg.relative_to(results)).encode() + b"\0" + reg.read_bytes())
     return digest.hexdigest()
