@@ -32,6 +32,7 @@ def draw_executed(ax_return: plt.Axes, ax_share: plt.Axes, runs: dict[str, list[
 
     share = DR.curves(runs, "test_executed", reps=reps)
     draw_learning_curves(ax_share, share, ylabel="share of test θ executed (IQM)", thesis=None)
+    ax_share.set_ylim(-0.05, 1.05)  # a share: the whole range, so 0 and 1 read as such
     try:
         ret = DR.curves(runs, "test_executed_return", reps=reps)
     except ValueError:  # no run has an executed test episode yet
