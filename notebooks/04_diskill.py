@@ -1168,11 +1168,14 @@ plt.show()
 # Di-SkilLV2 and V3 switch the curriculum off: $\log\tilde\pi(o\mid c) = 0$ in
 # [Eq. 4.8](#eq-4-8) and $\beta = 2000$, so every $\pi(c\mid o)$ is pushed towards the
 # uniform distribution over the contexts from $p(c)$; V3 draws 260 samples per expert
-# instead of 50. All variants have 5 experts (Table B.2).
+# instead of 50. All variants have 5 experts (Table B.2). SVSL (Chapter 3) runs beside
+# them with 20 linear experts (Table B.1); a context its Gaussian $\pi(c\mid o)$ proposes
+# outside the valid region gets $R_c(c) = -20\,d_c^2$ (B.4.1.1) and is not executed.
 #
 # **The thesis's outcome** (at least 4 seeds): BBRL and Di-SkilL reach high success
 # rates, BBRL slightly better; V2 converges to a much lower success rate and V3 needs more
-# samples to reach Di-SkilL. **Ours**: the counts printed below (2 % of the iterations at
+# samples to reach Di-SkilL. SVSL does worse and needs more samples to reach about 80 %
+# success. **Ours**: the counts printed below (2 % of the iterations at
 # `reduced`: early learning only). The success panel stays at 0 there. A longer probe of
 # Di-SkilL at the thesis's configuration (seed 0, 600 of its 4500 iterations, made outside
 # the book and recorded in `data/measurements/`, printed below) shows why: the ball is hit

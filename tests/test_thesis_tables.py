@@ -175,7 +175,7 @@ def test_known_agreements_are_not_flagged():
 def test_prose_and_runs_we_do_not_have_are_not_compared():
     c = cell("A.1", "Planar Reacher (Ablation)", "α")
     assert c["thesis"].startswith("varies") and c["differs"] is None and c["why"]
-    assert table("B.1")["differs"].map(lambda v: v is None).all()
+    assert not table("B.1")["differs"].any()  # SVSL on Chapter 4's table tennis: all as B.1
     qsm = table("C.2")[table("C.2")["row"] == "QSM"]
     assert (qsm["ours"] == NOT_RUN).all() and qsm["why"].str.startswith("not run here").all()
 

@@ -101,7 +101,7 @@ METHOD_STYLES: dict[str, dict[str, Any]] = {
     "thesis": {"color": "#555555", "linestyle": "--", "marker": "s"},
     "ours": {"color": "#0072B2", "linestyle": "-", "marker": "o"},
     # Chapter 3
-    "SVSL": {"color": "#D55E00", "linestyle": "-", "marker": "o"},
+    "SVSL": {"color": "#D55E00", "linestyle": "-", "marker": "X"},  # not "o": Di-SkilL's
     "SVSL, no responsibilities": {"color": "#E69F00", "linestyle": ":", "marker": "v"},
     "HiREPS": {"color": "#009E73", "linestyle": "--", "marker": "s"},
     "LaDiPS": {"color": "#CC79A7", "linestyle": "-.", "marker": "^"},
@@ -143,7 +143,7 @@ FIGURE_METHODS: dict[str, tuple[str, ...]] = {
     "fig-3-2-beer-pong": ("SVSL", "HiREPS", "LaDiPS"),
     "fig-3-2-table-tennis": ("SVSL", "HiREPS", "LaDiPS"),
     "fig-3-5-reacher": ("SVSL", "PPO"),
-    "fig-4-3b-ablation": ("Di-SkilL", "BBRL", "Di-SkilLV2", "Di-SkilLV3"),
+    "fig-4-3b-ablation": ("Di-SkilL", "BBRL", "Di-SkilLV2", "Di-SkilLV3", "SVSL"),
     "fig-4-3c-4-4-curves": ("Di-SkilL", "BBRL", "LinDi-SkilL", "PPO"),
     "fig-4-4-returns": ("Di-SkilL", "BBRL", "LinDi-SkilL", "PPO"),
     "fig-b-3-hopper": ("Di-SkilL", "BBRL", "LinDi-SkilL"),

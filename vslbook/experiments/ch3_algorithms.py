@@ -5,6 +5,11 @@
     vslbook run hireps --env vslbook/TableTennisCh3-v0 --budget full
     vslbook run svsl   --env vslbook/Reacher5Ch3-v0 --set reward=3.10
     vslbook run ppo    --env vslbook/Reacher5Ch3Step-v0 --set reward=3.8
+    vslbook run svsl   --env vslbook/TableTennis4D-v0 --budget smoke
+
+SVSL also runs on Chapter 4's table tennis (``vslbook/TableTennis4D-v0``), its curve in
+Fig. 4.3b, with Table B.1's hyper-parameters and the counts of
+:func:`vslbook.experiments.svsl_table_tennis_4d.svsl_counts`; the baselines do not.
 
 Registered here: ``svsl`` (Algorithm 1, Appendix A.2), ``hireps`` and ``ladips`` (the
 baselines of Fig. 3.2, Tables A.2 and A.3) and ``ppo`` (Fig. 3.5, Table A.5). The
@@ -53,8 +58,10 @@ SVSL_ENVS = {
     "vslbook/BeerPong-v0": "beer-pong",
     "vslbook/TableTennisCh3-v0": "table-tennis-ch3",
     "vslbook/Reacher5Ch3-v0": "reacher5-ch3",
+    "vslbook/TableTennis4D-v0": "table-tennis-4d",  # Chapter 4's table tennis (Fig. 4.3b)
 }
-HIREPS_ENVS = {k: v for k, v in SVSL_ENVS.items() if v != "reacher5-ch3"}
+HIREPS_ENVS = {k: v for k, v in SVSL_ENVS.items()
+               if v not in ("reacher5-ch3", "table-tennis-4d")}  # fmt: skip
 LADIPS_ENVS = {k: v for k, v in HIREPS_ENVS.items() if v != "planar-reacher"}
 PPO_ENVS = {"vslbook/Reacher5Ch3Step-v0": "reacher5-ch3"}
 
@@ -96,8 +103,9 @@ class EntropyProbe:
 
 
 def _entropy_fields(counts: dict[str, Any]) -> dict[str, Any]:
-    """The :class:`EntropyProbe` fields of a task's counts (beer pong, table tennis)."""
-    return {"entropy_draws": counts["entropy_draws"],
+    """The :class:`EntropyProbe` fields of a task's counts (beer pong, table tennis; none
+    where the counts have no ``entropy_draws``: Chapter 4's table tennis)."""
+    return {"entropy_draws": counts.get("entropy_draws"),
             "entropy_grid": tuple(counts["entropy_grid"]) if "entropy_grid" in counts else None,
             "entropy_contexts": counts.get("entropy_contexts"),
             "entropy_every": counts.get("entropy_every", 1)}  # fmt: skip
@@ -151,7 +159,7 @@ def _as(cls: type, config: Any, **extra: Any) -> Any:
 
 
 def env_of(task: str) -> str:
-    """The one-step env id of a Chapter 3 task (``beer-pong`` → ``vslbook/BeerPong-v0``)."""
+    """The one-step env id of a task SVSL runs on (``beer-pong`` → ``vslbook/BeerPong-v0``)."""
     for env, name in SVSL_ENVS.items():
         if name == task:
             return env
@@ -170,16 +178,22 @@ def task_of(env: str, table: dict[str, str]) -> str:
 # the configuration of each env at a budget (the Chapter 3 notebook's)
 # --------------------------------------------------------------------------------------
 def task_counts(task: str, budget: Budget) -> dict[str, Any]:
-    """The counts of beer pong or Chapter 3 table tennis at ``budget`` (their ``*_counts``)."""
-    from vslbook.experiments import svsl_beer_pong, svsl_table_tennis
+    """The counts of beer pong, Chapter 3 table tennis or (SVSL only) Chapter 4's table
+    tennis at ``budget`` (their ``*_counts``)."""
+    from vslbook.experiments import svsl_beer_pong, svsl_table_tennis, svsl_table_tennis_4d
 
     if task == "beer-pong":
         return svsl_beer_pong.beer_pong_counts(budget)
-    return svsl_table_tennis.table_tennis_counts(budget)
+    if task == "table-tennis-4d":
+        return svsl_table_tennis_4d.svsl_counts(budget)
+    if task == "table-tennis-ch3":
+        return svsl_table_tennis.table_tennis_counts(budget)
+    raise ValueError(f"no counts for task {task!r}; expected beer-pong, table-tennis-ch3 or "
+                     "table-tennis-4d")  # fmt: skip
 
 
 def svsl_defaults(env: str, budget: Budget, overrides: dict[str, Any]) -> SVSLRun:
-    """SVSL's configuration of ``env`` at ``budget`` (Tables A.1 and A.4 with its counts)."""
+    """SVSL's configuration of ``env`` at ``budget`` (Tables A.1, A.4 or B.1 with its counts)."""
     from vslbook.experiments import svsl_mixtures, svsl_planar, svsl_reacher
 
     task = task_of(env, SVSL_ENVS)
@@ -366,7 +380,7 @@ register_algorithm(
     "svsl", train=train_svsl, config=SVSLRun, envs=tuple(SVSL_ENVS), defaults=svsl_defaults,
     independent_of=_SCOPE,
     doc="SVSL (Ch. 3, Algorithm 1): mixture of linear-Gaussian experts with per-expert context "
-    "distributions; Tables A.1, A.4",
+    "distributions; Tables A.1, A.4 (and B.1: Chapter 4's table tennis, Fig. 4.3b)",
 )  # fmt: skip
 register_algorithm(
     "hireps", train=_train_baseline("HiREPS", HiREPSRun, HiREPSConfig, HIREPS_ENVS),

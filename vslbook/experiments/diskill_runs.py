@@ -29,9 +29,11 @@ __all__ = [
     "run_set",
 ]  # fmt: skip
 
-#: figure → (task, methods) as in the thesis (PPO runs separately, step-based).
+#: figure → (task, methods) as in the thesis (PPO runs separately, step-based). Fig. 4.3b
+#: also draws SVSL (Chapter 3's algorithm, 20 linear experts, Table B.1:
+#: :mod:`vslbook.experiments.svsl_table_tennis_4d`).
 FIGURES: dict[str, tuple[str, tuple[str, ...]]] = {
-    "4.3b": ("table-tennis-4d", ("diskill", "bbrl", "diskill-v2", "diskill-v3")),
+    "4.3b": ("table-tennis-4d", ("diskill", "bbrl", "diskill-v2", "diskill-v3", "svsl")),
     "4.3c": ("reacher5", ("diskill", "bbrl", "lindiskill")),
     "4.4a": ("hopper-jump", ("diskill", "bbrl", "lindiskill")),
     "4.4b": ("box-pushing-obstacle", ("diskill", "bbrl", "lindiskill")),
@@ -41,13 +43,15 @@ FIGURES: dict[str, tuple[str, tuple[str, ...]]] = {
 #: method → the label of the thesis's figures.
 LABELS = {
     "diskill": "Di-SkilL", "bbrl": "BBRL", "lindiskill": "LinDi-SkilL",
-    "diskill-v2": "Di-SkilLV2", "diskill-v3": "Di-SkilLV3", "ppo": "PPO",
+    "diskill-v2": "Di-SkilLV2", "diskill-v3": "Di-SkilLV3", "ppo": "PPO", "svsl": "SVSL",
 }  # fmt: skip
 #: figure → (method, method) pairs the thesis reports the first above the second at the
 #: end of training (Section 4.5.3 and the caption of Fig. 4.3b). "On par" gives no pair:
 #: hopper jump (Di-SkilL on par with BBRL, LinDi-SkilL similar after more samples).
+#: Fig. 4.3b: "SVSL shows worse performance, even though the model has 20 experts"
+#: (Section 4.5.2), as V3, which "needs more samples to reach the level of Di-SkilL".
 THESIS_AHEAD: dict[str, tuple[tuple[str, str], ...]] = {
-    "4.3b": (("diskill", "diskill-v2"), ("diskill", "diskill-v3")),
+    "4.3b": (("diskill", "diskill-v2"), ("diskill", "diskill-v3"), ("diskill", "svsl")),
     "4.3c": (("diskill", "bbrl"), ("diskill", "lindiskill"), ("diskill", "ppo")),
     "4.4a": (),
     "4.4b": (("diskill", "lindiskill"), ("lindiskill", "bbrl"), ("diskill", "ppo")),
@@ -56,7 +60,8 @@ THESIS_AHEAD: dict[str, tuple[tuple[str, str], ...]] = {
 }
 #: figure → the thesis's outcome in a line (the legend note of each panel).
 THESIS_OUTCOME = {
-    "4.3b": "thesis: BBRL ≳ Di-SkilL > V3 > V2",
+    "4.3b": "thesis: BBRL ≳ Di-SkilL > V3 > V2; SVSL worse, needs more samples to reach "
+    "about 80 % success",
     "4.3c": "thesis: Di-SkilL > BBRL > LinDi-SkilL, PPO poor",
     "4.4a": "thesis: Di-SkilL ≈ BBRL, LinDi-SkilL slower",
     "4.4b": "thesis: Di-SkilL > LinDi-SkilL > BBRL, PPO poor",
@@ -117,8 +122,14 @@ def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[s
       experts of :data:`REDUCED` (at least 20 iterations);
     * smoke ("does it run"): 2 iterations of at most 2 experts with 4 samples each,
       1 seed, evaluation after each iteration on 10 contexts.
+
+    SVSL (Fig. 4.3b) takes its own counts
+    (:func:`vslbook.experiments.svsl_table_tennis_4d.svsl_counts`, the same seeds and test
+    contexts), with ``iterations`` its N·K + weight iterations at the budget.
     """
     b = get_budget(budget)
+    if method == "svsl":
+        return _svsl_counts(task, b)
     cfg = diskill_config(task, method)
     share, most = REDUCED[task]
     out: dict[str, Any] = {
@@ -137,10 +148,22 @@ def counts(task: str, method: str, budget: Budget | str | None = None) -> dict[s
     return out
 
 
+def _svsl_counts(task: str, b: Budget) -> dict[str, Any]:
+    """:func:`counts` of SVSL: its counts at ``b`` and ``iterations``, N·K + weight
+    iterations (Chapter 4's table tennis only)."""
+    from vslbook.experiments import svsl_table_tennis_4d as TT
+
+    if task != TT.TASK:
+        raise ValueError(f"SVSL runs on {TT.TASK} in Chapter 4 (Fig. 4.3b), not on {task!r}")
+    c = TT.svsl_counts(b)
+    return c | {"iterations": TT.svsl_tt_config(b).total_iterations}
+
+
 def figure_runs(figure: str, budget: Budget | str | None = None) -> list[Any]:
     """The runs Fig. ``figure`` (``fig4-3b`` ... ``fig4-4d``, or ``4.3b`` ...) draws at
     ``budget``, as :class:`vslbook.experiments.run_plan.FigureRun` values: each method of
-    :data:`FIGURES` with :func:`counts`'s seeds, and PPO where the thesis runs it (on box
+    :data:`FIGURES` with :func:`counts`'s seeds (SVSL's length in its iterations, N·K plus
+    the weight iterations), and PPO where the thesis runs it (on box
     pushing only above ``smoke``: one rollout takes about 15 s there). They carry no
     overrides: ``vslbook run METHOD --env ENV --seed S --budget B`` trains the same runs."""
     from vslbook.experiments.ch4_algorithms import PPO_ENVS

@@ -82,7 +82,10 @@ Other places where the thesis was followed over the code or had to be interprete
       control step's remaining sub-steps; only the recorded trajectories differ).
     * Out-of-range contexts (SVSL's punishment, B.4.1.1 and A.3.3): -20 d_c², d_c the distance
       to the valid set (box, and the x/|y| interval the serve rules allow for the context's
-      v_x, clipped into its range).
+      v_x, clipped into its range), one squared excess per entry over the intersected
+      intervals (exact in the 4D task; until 2026-11 an entry outside both the box and the
+      serve interval counted both excesses). SVSL meets it on the 4D task (Fig. 4.3b);
+      Di-SkilL draws valid contexts only.
     * Step k tracks the primitive at (k + 1)·dt (fancy-gym's wrapper drops t = 0); the start
       delay is continuous, as in mp_pytorch. (Until 2026-11 step k tracked k·dt and the
       delay was rounded to the control grid.)
@@ -293,15 +296,28 @@ class TableTennis4D(EpisodicTask):
         return ok if np.ndim(contexts) > 1 else ok.reshape(np.shape(contexts)[:-1])
 
     def context_penalty(self, contexts: np.ndarray) -> np.ndarray:
+        """SVSL's guiding punishment R_c(c) = −20 d_c² (B.4.1.1), d_c the Euclidean distance
+        of c to the valid contexts: per entry, the excess over the box intersected with
+        what the serve rules allow (x ∈ the serve interval of the context's v_x, clipped
+        into its range; |y| <= 0.6). With the fixed v_x of the 4D task the valid set is
+        this box, so d_c is exact; in the hard task, whose valid (x, v_x) set is not a
+        box, it is the distance at the context's own v_x."""
         c = np.atleast_2d(np.asarray(contexts, dtype=np.float64))
-        excess = np.maximum(self.context_low - c, 0) + np.maximum(c - self.context_high, 0)
-        x, y, v_x = self.serve(c)
+        low = np.broadcast_to(self.context_low, c.shape).copy()
+        high = np.broadcast_to(self.context_high, c.shape).copy()
+        x, _, v_x = self.serve(c)
+        ix, iy = self._serve_columns()
         lo, hi = serve_x_interval(np.clip(v_x, 1.5, 4.0))
-        serve = np.maximum(lo - x, 0) + np.maximum(x - hi, 0)
-        serve_y = np.maximum(np.abs(y) - TABLE_Y_HALF, 0)
-        d2 = np.sum(excess**2, axis=-1) + serve**2 + serve_y**2
-        out = -20.0 * d2
+        low[:, ix], high[:, ix] = np.maximum(low[:, ix], lo), np.minimum(high[:, ix], hi)
+        low[:, iy] = np.maximum(low[:, iy], -TABLE_Y_HALF)
+        high[:, iy] = np.minimum(high[:, iy], TABLE_Y_HALF)
+        excess = np.maximum(low - c, 0.0) + np.maximum(c - high, 0.0)
+        out = -20.0 * np.sum(excess**2, axis=-1)
         return out if np.ndim(contexts) > 1 else out.reshape(np.shape(contexts)[:-1])
+
+    def _serve_columns(self) -> tuple[int, int]:
+        """The context columns of the ball's initial x and y (``x_ball0``, ``y_ball0``)."""
+        return self.context_names.index("x_ball0"), self.context_names.index("y_ball0")
 
     def describe_contexts(self) -> str:
         return (
