@@ -75,15 +75,14 @@ print(f"budget: {budget.name} ({budget.seeds} seeds per configuration); {source_
 
 # %% [markdown]
 # **Which network the live runs use.** The budget only scales counts (steps, seeds). The
-# thesis's networks (Table C.2: a 2048-wide critic, 16 diffusion steps) make about three
-# critic updates per second on a 2-core CPU, so the live runs below use *named*
-# configurations, chosen here in plain sight: `cpu-256` for the DeepMind Control run and
-# `cpu-64` for the small tasks. Every figure made from our runs prints, generated from the
-# run's config, how it differs from the thesis's table. Set `VSLBOOK_DIME_CONFIG=thesis` (a
-# GPU or a cluster) to run everything at the thesis's sizes. On a GPU the updates are
-# replayed as CUDA graphs (`vslbook.srl.cuda_graphs`). On one H200 that gave about 170
-# critic updates per second at the thesis's sizes, and about 530 summed over ten seeds
-# trained in one process. The README's throughput section has the measurements.
+# thesis's networks (Table C.2: a 2048-wide critic, 16 diffusion steps) make a few critic
+# updates per second on a 2-core CPU, so the live runs below use *named* configurations,
+# chosen here in plain sight: `cpu-256` for the DeepMind Control run and `cpu-64` for the
+# small tasks. Every figure made from our runs prints, generated from the run's config, how
+# it differs from the thesis's table. Set `VSLBOOK_DIME_CONFIG=thesis` (a GPU or a cluster)
+# to run everything at the thesis's sizes. On a GPU the updates are replayed as CUDA graphs
+# (`vslbook.srl.cuda_graphs`); `benchmarks/dime_throughput.py` measures the update rates,
+# and the README's throughput section lists what it measured on a CPU and a GPU.
 
 # %%
 import os
