@@ -54,7 +54,7 @@ from vslbook.bounds import show
 from vslbook.bounds import svsl as S
 from vslbook.budget import get_budget
 from vslbook.data import measurements
-from vslbook.experiments.figure_sources import source_text
+from vslbook.experiments.figure_sources import annotate, source_text
 from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
@@ -461,6 +461,7 @@ fig = P.draw_fig_3_1(
     title=f"Fig. 3.1 (ours, budget {planar_set.budget}: {counts['n_experts']} experts, seed 0 "
     f"of {n_seeds}; thesis: 60 experts, best of 15 seeds)\n{planar_settings}",
 )
+annotate(fig, planar_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-1-planar")
 plt.show()
 
@@ -555,6 +556,7 @@ fig.suptitle(
     fontsize=10,
 )
 fig.tight_layout()
+annotate(fig, planar_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-1-scores")
 plt.show()
 
@@ -622,10 +624,8 @@ bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 fig, axes = plt.subplots(3, 2, figsize=(11, 13))
 BP.draw_learning_curves(axes[0, 0], BP.learning_curves(bp_runs), thesis=None)
 axes[0, 0].set_title("(a) test return")
-BP.draw_learning_curves(
-    axes[0, 1], BP.learning_curves(bp_runs, "expected_entropy"),
-    ylabel="expected mixture entropy (IQM)", thesis=None,
-)  # fmt: skip
+BP.draw_learning_curves(axes[0, 1], BP.learning_curves(bp_runs, "expected_entropy"),
+                        ylabel="expected mixture entropy (IQM)", thesis=None)  # fmt: skip
 axes[0, 1].set_title("Fig. A.1: expected entropy")
 BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
 axes[1, 0].set_title("(c) SVSL context distributions (seed 0)")
@@ -647,6 +647,7 @@ fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
          ("curves", "coverage", "success", "trajectories", "entropy")),
          fontsize=8, color="#555555", va="top")  # fmt: skip
 fig.tight_layout()
+annotate(fig, bp_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-2-beer-pong")
 plt.show()
 
@@ -683,6 +684,7 @@ reacher_runs = RE.by_method_and_reward(reacher_set.runs)  # (method, reward) -> 
 print(f"reacher runs ready in {time.perf_counter() - t0:.0f} s")
 reacher_curves = RE.reacher_curves(reacher_runs)
 fig = RE.draw_fig_3_5(reacher_curves, reacher_set.budget)
+annotate(fig, reacher_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-5-reacher")
 plt.show()
 
@@ -747,6 +749,7 @@ fig.suptitle(
 fig.text(0.01, 0.0, "\n".join(TT.THESIS_OUTCOME[k] for k in ("curves", "coverage", "entropy")),
          fontsize=8, color="#555555", va="top")  # fmt: skip
 fig.tight_layout()
+annotate(fig, tt_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-2-table-tennis")
 plt.show()
 
@@ -775,6 +778,7 @@ fig.suptitle(
     f"c = {np.array2string(c33, precision=2)}\n{settings_phrase('table-tennis-ch3')}",
     fontsize=10,
 )
+annotate(fig, tt_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-3-3-strikes")
 plt.show()
 assert len(strikes) == 3 and all(s["episode"].ret == s["episode"].ret for s in strikes)

@@ -67,7 +67,7 @@ from vslbook.bounds import diskill as D
 from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.data import measurements
-from vslbook.experiments.figure_sources import source_text
+from vslbook.experiments.figure_sources import annotate, source_text
 from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
@@ -1040,6 +1040,7 @@ RF.draw_reaches(axes[2], model, goals)
 fig.suptitle(f"Fig. 4.2 (ours, budget {set_5lr.budget}: {model.config.n_experts} experts, "
              f"{model.iteration} iterations, seed 0; thesis: 50 experts)", fontsize=10)  # fmt: skip
 fig.tight_layout()
+annotate(fig, set_5lr)  # where the runs came from, under the figure
 save_figure(fig, "fig-4-2-reacher")
 plt.show()
 
@@ -1112,6 +1113,7 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
                  f"iterations, {count_phrase(len(runs['diskill']), 'seed')}", fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
+annotate(fig, *sets.values())  # where the runs came from, under the figure
 save_figure(fig, "fig-4-3c-4-4-curves")
 plt.show()
 
@@ -1159,6 +1161,7 @@ for figure, ax_ret, ax_share in zip(succ, axes[::2], axes[1::2], strict=True):
                      fontsize=10)  # fmt: skip
     ax_share.set_title(f"{DR.FIGURES[figure][0]}: share executed", fontsize=10)
 fig.tight_layout()
+annotate(fig, *(sets[f] for f in succ))  # where the runs came from, under the figure
 save_figure(fig, "fig-4-4-executed")
 plt.show()
 
@@ -1198,6 +1201,7 @@ fig.suptitle(f"Fig. 4.3b (ours, budget {tt_set.budget}: {c['iterations']} iterat
              f"{count_phrase(len(runs_tt['diskill']), 'seed')}; thesis: 4500 iterations)",
              fontsize=10)  # fmt: skip
 fig.tight_layout()
+annotate(fig, tt_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
 scores, verdicts = DR.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
@@ -1249,6 +1253,7 @@ fig.suptitle(
     f"Diverse skills of one Di-SkilL policy (ours, budget {skills_set.budget}, seed 0)", fontsize=10
 )
 fig.tight_layout()
+annotate(fig, sets["4.4b"], sets["4.4c"])  # where the runs came from, under the figure
 save_figure(fig, "fig-4-5-4-6-skills")
 plt.show()
 
@@ -1276,6 +1281,7 @@ fig.suptitle(f"Fig. B.3 (ours, budget {sets['4.4a'].budget}: {c['iterations']} i
              f"{count_phrase(len(runs_hj['diskill']), 'seed')}; thesis: 1400 iterations, "
              "24 seeds)", fontsize=10)  # fmt: skip
 fig.tight_layout()
+annotate(fig, sets["4.4a"])  # where the runs came from, under the figure
 save_figure(fig, "fig-b-3-hopper")
 plt.show()
 

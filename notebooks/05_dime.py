@@ -48,7 +48,7 @@ from vslbook.budget import get_budget
 from vslbook.data import paper_curves
 from vslbook.experiments.ch5_runs import chapter5_figure, figure_runs
 from vslbook.experiments.dime_runs import chapter5_run_sets, load_agent
-from vslbook.experiments.figure_sources import source_text
+from vslbook.experiments.figure_sources import annotate, source_text
 from vslbook.plots import (
     count_phrase,
     learning_curve,
@@ -1184,12 +1184,10 @@ plt.show()
 # `budget.seeds` seeds.
 
 # %% tags=["full-width"]
-ENV = "dm_control/cheetah-run-v0"
 # total_steps is the thesis's count (1M), scaled by the budget; evaluation every 24k steps
 # at `full` (as published), every 6k at `reduced`, once at the end at `smoke`.
-assert RUN_SETS["cheetah"].env == ENV
-# the runs: recorded ones where data/results/ has them, else trained now
-fs_cheetah, cheetah = chapter5_figure("fig5-3-cheetah", RUNS, TABLES)
+assert RUN_SETS["cheetah"].env == "dm_control/cheetah-run-v0"
+fs_cheetah, cheetah = chapter5_figure("fig5-3-cheetah", RUNS, TABLES)  # recorded, or trained now
 print(fs_cheetah.caption())
 ours_curve = iqm_curve(cheetah.curve_rows().rename(columns={"step": "env_steps"}),
                        x="env_steps", y="value", run="run", reps=budget.bootstrap_reps)
@@ -1197,12 +1195,14 @@ published = iqm_curve(paper_curves("dmc_cheetah_run"), reps=budget.bootstrap_rep
 horizon = max(ours_curve.env_steps.max(), 24_000)
 fig, axes = plt.subplots(1, 2, figsize=(11, 3.9))
 n_ours = cheetah.seeds("DIME")
-thesis_vs_ours(axes[0], published, ours_curve, budget=budget.name,
+thesis_vs_ours(axes[0], published, ours_curve, budget=fs_cheetah.budget,
                title="cheetah-run: published (10 seeds, 1M steps) vs ours")
-thesis_vs_ours(axes[1], published[published.env_steps <= 1.05 * horizon], ours_curve,
-               budget=budget.name, title=f"zoom on our {budget.name} budget ({n_ours} seeds)")
+zoom = published[published.env_steps <= 1.05 * horizon]
+thesis_vs_ours(axes[1], zoom, ours_curve, budget=fs_cheetah.budget,
+               title=f"zoom on our {fs_cheetah.budget} budget ({n_ours} seeds)")
 fig.text(0.01, 0.005, "ours: " + cheetah.captions(), fontsize=7, va="bottom")
 fig.tight_layout(rect=(0, 0.06, 1, 1))
+annotate(fig, fs_cheetah)  # where the runs came from, under the figure
 save_figure(fig, f"ch5-cheetah-run-ours-vs-published-{budget.name}")
 plt.show()
 # Side by side at the published evaluation steps our runs reached (24k and 48k at `reduced`).
@@ -1280,6 +1280,7 @@ fig.suptitle(f"Ablations on Pendulum-v1 instead of the thesis's tasks ({budget.n
              "IQM ± 95 % CI over seeds; dotted: end of the 5000 exploration steps")
 fig.tight_layout()
 fig.text(0.01, 0.0, abl.captions(), fontsize=7.5, va="top")  # under the panels
+annotate(fig, fs_abl)  # where the runs came from, under the figure
 save_figure(fig, f"ch5-ablations-pendulum-{budget.name}")
 plt.show()
 
@@ -1351,6 +1352,7 @@ fig.suptitle(f"Fig. 5.7, live ({budget.name} budget, {pm_steps} env steps, 1 see
              "value estimate and 50 rollouts")
 fig.tight_layout()
 fig.text(0.01, 0.0, pm.captions(), fontsize=7.5, va="top")  # under the panels
+annotate(fig, fs_pm)  # where the runs came from, under the figure
 save_figure(fig, f"fig5-7-pointmass-{budget.name}")
 plt.show()
 display(pd.DataFrame(summary).T.rename_axis("rollouts ending at"))

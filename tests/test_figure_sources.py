@@ -16,7 +16,7 @@ import pytest
 
 from vslbook.data import register_file
 from vslbook.experiments.diskill_runs import load_model
-from vslbook.experiments.figure_sources import SMOKE_VERDICT, figure_set, source_mode
+from vslbook.experiments.figure_sources import SMOKE_VERDICT, FigureSet, figure_set, source_mode
 from vslbook.experiments.record import record, recorded_dir
 from vslbook.experiments.recorded_runs import materialise, metric_rows
 from vslbook.experiments.run_plan import figure_runs
@@ -214,3 +214,27 @@ def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path,
 
     assert replace(fs, budget="full").verdict("x") == PROBE_VERDICT
     assert [r for r in result_rows([FIGURE]) if r["method"] == "diskill"] == []
+
+
+def test_annotate_puts_the_caption_under_the_figure_in_red_when_stale(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from vslbook.experiments.figure_sources import annotate
+
+    fresh = FigureSet(FIGURE, "full", {"diskill": [tmp_path / "a"]}, recorded={
+        "a": {"date": "2026-11-27", "git_sha": "abc1234", "stale": False}})  # fmt: skip
+    stale = replace(fresh, recorded={"a": {"date": "2026-11-27", "git_sha": "abc1234",
+                                           "stale": True}})  # fmt: skip
+    fig = plt.figure(figsize=(6, 4))
+    fig.text(0.01, 0.0, "thesis: one line\nthesis: another", va="top")
+    annotate(fig, fresh)
+    ours = fig.texts[-1]
+    assert ours.get_text().startswith("Runs of fig4-4a: recorded (data/results/fig4-4a/full")
+    assert ours.get_position()[1] < 0  # below the two lines already at the foot
+    annotate(fig, stale)
+    assert fig.texts[-1].get_text().startswith("WARNING: recorded by code that has changed")
+    assert fig.texts[-1].get_color() == "#b00020"
+    plt.close(fig)

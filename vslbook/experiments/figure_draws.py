@@ -10,7 +10,6 @@ the thesis's, and "smoke: code path only" where it applies.
 
 from __future__ import annotations
 
-import textwrap
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -29,9 +28,12 @@ def _set(figure: str, budget: Budget | str | None, root: str | Path, progress: b
     return figure_set(figure, budget, Path(root), mode=mode, progress=progress, **kw)
 
 
-def footnote(fig: plt.Figure, text: str, width: int = 150) -> None:
-    """``text`` (a run set's caption) under the figure, wrapped, in grey."""
-    fig.text(0.01, 0.0, textwrap.fill(text, width), fontsize=7, color="#555555", va="top")
+def footnote(fig: plt.Figure, *sets, width: int = 150) -> None:
+    """Where the figure's runs came from, under it
+    (:func:`vslbook.experiments.figure_sources.annotate`: red where a recorded run is stale)."""
+    from vslbook.experiments.figure_sources import annotate
+
+    annotate(fig, *sets, width=width)
 
 
 def draw_diskill_curves(
@@ -69,7 +71,7 @@ def draw_diskill_curves(
     ax.set_title(f"Fig. {figure}: {task} (ours, {source}, budget {b.name}: "
                  + ", ".join(differs) + ")", fontsize=8, wrap=True)  # fmt: skip
     fig.tight_layout()
-    footnote(fig, fs.caption(), width=110)
+    footnote(fig, fs, width=110)
     return fig
 
 
@@ -93,7 +95,7 @@ def draw_fig_3_1(budget: Budget | str | None = None, root: str | Path = "runs",
               f"of {len(fs.runs[P.VARIANTS[0]])}; thesis: 60 experts, best of 15 seeds)\n"
               f"{settings_phrase('planar-reacher')}",
     )  # fmt: skip
-    footnote(fig, fs.caption(), width=120)
+    footnote(fig, fs, width=120)
     return fig
 
 
@@ -126,7 +128,7 @@ def draw_fig_3_2(budget: Budget | str | None = None, root: str | Path = "runs",
     fig.suptitle("Fig. 3.2 (ours; thesis: 20 seeds, success 92 % for SVSL and 75 % for HiREPS)",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()
-    footnote(fig, bp.caption() + " " + tt.caption(), width=130)
+    footnote(fig, bp, tt, width=130)
     return fig
 
 
@@ -139,5 +141,5 @@ def draw_fig_3_5(budget: Budget | str | None = None, root: str | Path = "runs",
     use_style()
     fs = _set("fig3-5", budget, root, progress)
     fig = RE.draw_fig_3_5(RE.reacher_curves(RE.by_method_and_reward(fs.runs)), fs.budget)
-    footnote(fig, fs.caption(), width=120)
+    footnote(fig, fs, width=120)
     return fig

@@ -39,7 +39,7 @@ from vslbook.experiments.run_plan import FigureRun, figure_runs
 from vslbook.results import RunDir, RunDirError
 
 __all__ = ["MODES", "PROBE_VERDICT", "RETRAIN_ENV", "SMOKE_VERDICT", "SOURCE_ENV", "FigureSet",
-           "figure_set", "source_mode", "source_text"]  # fmt: skip
+           "annotate", "figure_set", "source_mode", "source_text"]  # fmt: skip
 
 SOURCE_ENV = "VSLBOOK_SOURCE"
 RETRAIN_ENV = "VSLBOOK_RETRAIN"
@@ -291,3 +291,22 @@ def figure_set(
                       f"has changed since ({', '.join(out.stale[:3])}...); `vslbook results "
                       "--verify` replays them with today's code", stacklevel=2)  # fmt: skip
     return out
+
+
+def annotate(fig, *sets: FigureSet, width: int = 130) -> None:
+    """Write under ``fig`` where its runs came from (each set's :meth:`FigureSet.caption`),
+    in grey; in red, headed "WARNING", where a recorded run was made by code that has
+    changed since (:attr:`FigureSet.stale`), so the warning travels with the figure."""
+    import textwrap
+
+    text = " ".join(dict.fromkeys(fs.caption() for fs in sets))
+    stale = any(fs.stale for fs in sets)
+    if stale:
+        text = "WARNING: recorded by code that has changed since; " + text
+    below = 0.0  # under any text already at the figure's foot (e.g. the thesis's outcomes)
+    for t in fig.texts:
+        if t.get_position()[1] <= 0.0 and t.get_va() == "top":
+            lines = t.get_text().count("\n") + 1
+            below = max(below, lines * t.get_fontsize() * 1.4 / 72 / fig.get_figheight())
+    fig.text(0.01, -below, textwrap.fill(text, width), fontsize=7, va="top",
+             color="#b00020" if stale else "#555555")  # fmt: skip
