@@ -66,19 +66,29 @@ print(f"budget of the live cells: {budget.name}; {source_text()}")
 # ## Results at a glance
 #
 # The thesis's claims about this chapter's robot results, checked on the runs its figures
-# draw (recorded full-budget runs where `data/results/` has them; see the line above for
-# where else they come from). `met` / `not met` compare final IQMs over the seeds recorded
-# so far; `pending`: a method has no finished run yet; `smoke`: smoke runs test the code
-# path only. The figures, with ours beside the thesis's numbers, are in Sections 7 and 9 (Fig. 3.2); the
-# derivations come first below.
+# draw: recorded full-budget runs where `data/results/` has them (the line above says where
+# else they come from). The figure puts ours, the final IQM over seeds with its 95 % CI,
+# beside the thesis's numbers (hollow diamonds) and the claim's threshold (dashed); its
+# caption says which runs it read (budget, seeds, code version, date). `met` / `not met`
+# compare final IQMs over the seeds recorded so far; `pending`: a method has no finished
+# run yet; `smoke`: smoke runs test the code path only. The full figures (Fig. 3.2's reward
+# curves, context coverage and cup grid) are in Sections 7 and 9; the derivations come
+# first below.
 
 # %%
 from pathlib import Path
 
+from vslbook.experiments.figure_sources import figure_set
 from vslbook.experiments.reproduction import claims_overview
+from vslbook.experiments.reproduction_figure import results_figure
 
-display(claims_overview(["fig3-2"], budget, Path(vslbook.__file__).resolve().parents[1] / "runs",
-                        reps=budget.bootstrap_reps))
+root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
+opening = {"fig3-2": figure_set("fig3-2", budget, root, progress=True)}
+fig = results_figure(opening, reps=budget.bootstrap_reps)
+annotate(fig, *opening.values())  # where the runs came from, under the figure
+save_figure(fig, f"ch3-results-{budget.name}")
+plt.show()
+display(claims_overview(list(opening), sets=opening, reps=budget.bootstrap_reps))
 
 
 # %% [markdown]

@@ -79,19 +79,29 @@ print(f"budget of the live cells: {budget.name}; {source_text()}")
 # ## Results at a glance
 #
 # The thesis's claims about this chapter's robot results, checked on the runs its figures
-# draw (recorded full-budget runs where `data/results/` has them; see the line above for
-# where else they come from). `met` / `not met` compare final IQMs over the seeds recorded
-# so far; `pending`: a method has no finished run yet; `smoke`: smoke runs test the code
-# path only. The figures, with ours beside the thesis's numbers, are in Sections 8 and 9 (Figs. 4.3 and 4.4); the
-# derivations come first below.
+# draw: recorded full-budget runs where `data/results/` has them (the line above says where
+# else they come from). Each panel puts ours, the final IQM over seeds with its 95 % CI,
+# beside the claim (a dashed threshold where the thesis says "high success rates", the
+# other method's row where it says "above" or "on par"); the caption says which runs it
+# read (budget, seeds, code version, date). `met` / `not met` compare final IQMs over the
+# seeds recorded so far; `pending`: a method has no finished run yet; `smoke`: smoke runs
+# test the code path only. The learning curves are in Sections 8 and 9 (Figs. 4.3 and
+# 4.4); the derivations come first below.
 
-# %%
+# %% tags=["full-width"]
 from pathlib import Path
 
+from vslbook.experiments.figure_sources import figure_set
 from vslbook.experiments.reproduction import claims_overview
+from vslbook.experiments.reproduction_figure import results_figure
 
-display(claims_overview(["fig4-3b", "fig4-3c", "fig4-4a"], budget, Path(vslbook.__file__).resolve().parents[1] / "runs",
-                        reps=budget.bootstrap_reps))
+root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
+opening = {f: figure_set(f, budget, root, progress=True) for f in ("fig4-3b", "fig4-3c", "fig4-4a")}
+fig = results_figure(opening, reps=budget.bootstrap_reps)
+annotate(fig, *opening.values())  # where the runs came from, under the figure
+save_figure(fig, f"ch4-results-{budget.name}")
+plt.show()
+display(claims_overview(list(opening), sets=opening, reps=budget.bootstrap_reps))
 
 
 # %% [markdown]

@@ -117,6 +117,19 @@ def test_site_has_the_chapters_and_bibliography(site: Path):
 
 # Pages whose notebooks draw figures: each must show at least one.
 FIGURE_PAGES = ("02_foundations.html", "03_svsl.html", "04_diskill.html", "05_dime.html")
+# Chapters that open with their results: the first section is "Results at a glance", with
+# a figure and the table of the thesis's claims (claim, status) before any derivation.
+RESULTS_PAGES = ("03_svsl.html", "04_diskill.html", "05_dime.html")
+_OPENING = """() => {
+  const first = document.querySelector('article section section, article h2');
+  const sec = first && (first.tagName === 'SECTION' ? first : first.closest('section'));
+  if (!sec) return null;
+  const h = sec.querySelector('h2');
+  return {heading: h ? h.innerText : '',
+          images: sec.querySelectorAll('.cell_output img').length,
+          columns: Array.from(sec.querySelectorAll('.cell_output table th'))
+                        .map(t => t.innerText.trim())};
+}"""
 
 
 @pytest.fixture(scope="module")
@@ -185,6 +198,8 @@ def _check_page(browser, url: str, name: str, server: str) -> dict:
         if raw in prose:
             at = prose.index(raw)
             problems.append(f"{name}: raw {raw!r} in the text: ...{prose[at - 60:at + 60]!r}")
+    if name in RESULTS_PAGES:
+        problems += _opening_problems(name, page.evaluate(_OPENING))
     images = page.evaluate(_IMAGES)
     if name in FIGURE_PAGES and not images:
         problems.append(f"{name}: no figure on the page")
@@ -209,3 +224,17 @@ def _check_page(browser, url: str, name: str, server: str) -> dict:
         page.screenshot(path=str(SHOTS / f"{stem}-figure.png"))
     page.close()
     return measured
+
+
+def _opening_problems(name: str, opening: dict | None) -> list[str]:
+    """What a chapter's first section lacks of its results (:data:`RESULTS_PAGES`)."""
+    if opening is None or "Results at a glance" not in opening["heading"]:
+        got = None if opening is None else opening["heading"]
+        return [f"{name}: the first section is {got!r}, not 'Results at a glance'"]
+    problems = []
+    if not opening["images"]:
+        problems.append(f"{name}: 'Results at a glance' shows no figure")
+    if not {"claim", "status"} <= set(opening["columns"]):
+        problems.append(f"{name}: 'Results at a glance' has no table of the claims (claim, "
+                        f"status); its table columns: {opening['columns']}")
+    return problems

@@ -70,7 +70,51 @@ def test_text_puts_the_thesis_numbers_beside_ours(beer_pong):
 
 def test_every_claim_names_a_kind_it_can_check():
     kinds = {c.kind for claims in CLAIMS.values() for c in claims}
-    assert kinds <= {"at_least", "above", "within_or_above"}
+    assert kinds <= {"at_least", "above", "within_or_above", "within_or_above_published"}
+
+
+def test_a_claim_of_an_unknown_kind_or_a_stray_curve_is_refused():
+    from vslbook.experiments.reproduction import Claim
+
+    with pytest.raises(ValueError, match=r"claim kind 'below'; expected one of"):
+        Claim("x", "below", "DIME")
+    with pytest.raises(ValueError, match="published curve"):
+        Claim("x", "above", "DIME", "CrossQ", published="dmc_cheetah_run")
+    with pytest.raises(ValueError, match="published curve"):
+        Claim("x", "within_or_above_published", "DIME")
+
+
+def _dime(root: Path, name: str, steps: list[int], returns: list[float]) -> Path:
+    path = root / name
+    path.mkdir(parents=True)
+    (path / "config.json").write_text(json.dumps({"env": "dm_control/cheetah-run-v0"}))
+    rows = [{"step": s, "eval_return": v} for s, v in zip(steps, returns, strict=True)]
+    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    return path
+
+
+def test_cheetah_is_held_against_the_published_curve_where_our_runs_end(tmp_path):
+    import pandas as pd
+    from scipy.stats import trim_mean
+
+    from vslbook.experiments.reproduction import published_at
+
+    # independent: the authors' returns at 48k steps from the csv, their 25 %-trimmed mean
+    csv = pd.read_csv(Path(__file__).resolve().parents[1] / "data/paper/dime_learning_curves.csv")
+    at = csv[(csv.env == "dmc_cheetah_run") & (csv.env_steps == 48_000)].mean_return
+    pub = published_at("dmc_cheetah_run", 49_000, reps=200)  # nearest published step: 48k
+    assert pub["step"] == 48_000 and pub["seeds"] == len(at) == 10
+    assert pub["iqm"] == pytest.approx(trim_mean(at, 0.25))
+    assert pub["ci_low"] <= pub["iqm"] <= pub["ci_high"]
+
+    def status(final: float) -> str:
+        runs = [_dime(tmp_path / f"{final}", f"d{i}", [24_000, end], [1.0, final])
+                for i, end in enumerate((48_000, 50_000))]  # the shorter run sets the step
+        fs = FigureSet("fig5-3-cheetah", "reduced", {"DIME": runs})
+        return verdicts("fig5-3-cheetah", fs, "eval_return", reps=200)["status"].iloc[0]
+
+    assert status(pub["ci_low"] + 1.0) == "met"
+    assert status(pub["ci_low"] - 1.0) == "not met"
 
 
 def test_a_run_without_the_metric_is_named(tmp_path):

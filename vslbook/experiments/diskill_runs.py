@@ -260,7 +260,7 @@ def final_scores(
     Runs of different lengths (PPO on 5LR at ``reduced``) are compared at their own last
     evaluation.
     """
-    from vslbook import stats
+    from vslbook.experiments.reproduction import final_scores as finals
     from vslbook.results import RunDir
 
     if figure not in THESIS_AHEAD:
@@ -268,29 +268,19 @@ def final_scores(
     unknown = sorted(set(runs) - set(LABELS))
     if unknown:
         raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(LABELS)}")
-    table, seconds = {}, {}
+    scores = finals(runs, y, reps=reps)  # method, runs, iqm, ci_low, ci_high
+    seconds = {}
     for method, paths in runs.items():
-        last, times = [], []
-        for path in paths:
-            metrics = RunDir.open(path).metrics()
-            rows = [r for r in metrics if r.get(y) is not None]
-            if not rows:
-                raise ValueError(f"{path}: no {y!r} in metrics.jsonl")
-            last.append(float(rows[-1][y]))
-            times += [r["iteration_seconds"] for r in metrics if "iteration_seconds" in r]
-        table[method] = np.array(last)[:, None]
+        times = [r["iteration_seconds"] for path in paths for r in RunDir.open(path).metrics()
+                 if "iteration_seconds" in r]  # fmt: skip
         seconds[method] = float(np.median(times)) if times else float("nan")
-    point, ci = stats.interval_estimates(table, reps=reps)
-    scores = pd.DataFrame([
-        {"method": m, "label": LABELS[m], "runs": len(table[m]), "iqm": float(point[m][0]),
-         "ci_low": float(ci[m][0, 0]), "ci_high": float(ci[m][1, 0]),
-         "s_per_iteration": seconds[m]}
-        for m in table
-    ])  # fmt: skip
+    scores.insert(1, "label", scores["method"].map(LABELS))
+    scores["s_per_iteration"] = scores["method"].map(seconds)
+    point = scores.set_index("method")["iqm"]
     verdicts = pd.DataFrame(
         [{"ahead": LABELS[a], "behind": LABELS[b],
-          "as_in_thesis": None if point[a][0] == point[b][0] else point[a][0] > point[b][0]}
-         for a, b in THESIS_AHEAD[figure] if a in table and b in table],
+          "as_in_thesis": None if point[a] == point[b] else bool(point[a] > point[b])}
+         for a, b in THESIS_AHEAD[figure] if a in point.index and b in point.index],
         columns=["ahead", "behind", "as_in_thesis"],
     )  # fmt: skip
     return scores, verdicts
