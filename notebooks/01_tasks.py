@@ -53,7 +53,7 @@ import numpy as np
 from vslbook.budget import get_budget
 from vslbook.envs.robot import TASKS, make_task
 from vslbook.envs.robot.render import CAMERAS, draw_path, render_paths, render_scene
-from vslbook.plots import use_style
+from vslbook.plots import panel_grid, save_figure, use_style
 
 use_style()
 print(f"budget: {get_budget().name} (this page runs the same at every budget)")
@@ -97,7 +97,7 @@ assert all(r[2] > 0 for r in rows), "every task has primitive parameters"
 # (table tennis: serves that would not clear the net or land on the table; box pushing:
 # goals too close to the box's start, obstacles not between start and goal).
 
-# %%
+# %% tags=["full-width"]
 rng = np.random.default_rng(0)
 panels = []
 for name in TASKS:
@@ -110,20 +110,16 @@ for name in TASKS:
     panels += [(name, c, names, task.context_low, task.context_high, p) for p in pairs]
     assert np.all(task.context_valid(c)), f"{name}: p(c) drew a context its rules reject"
     task.close()
-cols = 5
-rows_ = -(-len(panels) // cols)
-fig, axes = plt.subplots(rows_, cols, figsize=(3.1 * cols, 2.7 * rows_))
-for ax, (name, c, names, lo, hi, (i, j)) in zip(axes.flat, panels, strict=False):
+fig, axes = panel_grid(len(panels), panel=(5.2, 3.2))  # two per row, each ≥ 400 px wide
+for ax, (name, c, names, lo, hi, (i, j)) in zip(axes, panels, strict=True):
     ax.scatter(c[:, i], c[:, j], s=1, alpha=0.3)
     ax.add_patch(
         plt.Rectangle((lo[i], lo[j]), hi[i] - lo[i], hi[j] - lo[j], fill=False, lw=0.8, color="0.3")
     )
     ax.set(xlabel=names[i], ylabel=names[j])
-    ax.set_title(name, fontsize=8)
-    ax.tick_params(labelsize=7)
-for ax in list(axes.flat)[len(panels) :]:
-    ax.axis("off")
+    ax.set_title(name, fontsize=9)
 fig.tight_layout()
+save_figure(fig, f"tasks-contexts-{get_budget().name}")
 plt.show()
 
 # %% [markdown]
@@ -135,23 +131,20 @@ plt.show()
 # cup, the hopper's jump goal, the box-pushing goal and obstacle. The planar 10-link reacher
 # of Fig. 3.1 has no simulator; Chapter 3 draws it with its obstacles.
 
-# %%
+# %% tags=["full-width"]
 scenes = [n for n in TASKS if n in CAMERAS]
-cols = 4
-fig, axes = plt.subplots(
-    -(-len(scenes) // cols), cols, figsize=(3.4 * cols, 2.9 * -(-len(scenes) // cols))
-)
+fig, axes = panel_grid(len(scenes), panel=(5.2, 4.2))  # two per row, each ≥ 400 px wide
 pictures = {}
-for ax, name in zip(axes.flat, scenes, strict=False):  # spare panels stay empty
+for ax, name in zip(axes, scenes, strict=True):
     task = make_task(name)
     context = task.sample_contexts(1, np.random.default_rng(0))[0]
     pictures[name] = render_scene(task, context, width=400, height=300)
     task.close()
     ax.imshow(pictures[name])
-    ax.set_title(f"{name}\nc = {np.array2string(context, precision=2)}", fontsize=8)
-for ax in axes.flat:
+    ax.set_title(f"{name}\nc = {np.array2string(context, precision=2)}", fontsize=9)
     ax.axis("off")
 fig.tight_layout()
+save_figure(fig, f"tasks-scenes-{get_budget().name}")
 plt.show()
 # a picture that rendered nothing would be one flat colour
 assert all(p.std() > 10 for p in pictures.values()), "a scene rendered as a flat image"
@@ -161,13 +154,13 @@ assert all(p.std() > 10 for p in pictures.values()), "a scene rendered as a flat
 # the context places something. Below, the box-pushing obstacle and goal at two contexts,
 # and the difference of the two pictures.
 
-# %%
+# %% tags=["full-width"]
 task = make_task("box-pushing-obstacle")
 c1, c2 = task.sample_contexts(2, np.random.default_rng(1))
 a, b = render_scene(task, c1), render_scene(task, c2)
 task.close()
 diff = np.abs(a.astype(int) - b.astype(int)).sum(-1)
-fig, axes = plt.subplots(1, 3, figsize=(10, 2.8))
+fig, axes = panel_grid(3, panel=(5.2, 3.6))  # two per row, each ≥ 400 px wide
 for ax, img, title in zip(
     axes, (a, b, diff), ("context 1", "context 2", "|difference|"), strict=True
 ):
@@ -175,6 +168,7 @@ for ax, img, title in zip(
     ax.set_title(title, fontsize=9)
     ax.axis("off")
 fig.tight_layout()
+save_figure(fig, f"tasks-two-contexts-{get_budget().name}")
 plt.show()
 changed = (diff > 30).mean()
 print(f"{100 * changed:.1f} % of the pixels change between the two contexts")
@@ -203,16 +197,14 @@ assert 0.0005 < changed < 0.3, "the context should move a few objects, not the w
 # search on its height; the reachers (no success defined) run random parameters
 # $\theta \sim \mathcal{N}(0, I)$.
 
-# %%
+# %% tags=["full-width"]
 from vslbook.envs.robot.examples import EXAMPLES
 
 assert set(EXAMPLES) == set(scenes), "every MuJoCo task gets an episode"
 colours = ("tab:orange", "tab:cyan")
-fig, axes = plt.subplots(
-    -(-len(scenes) // cols), cols, figsize=(3.4 * cols, 3.0 * -(-len(scenes) // cols))
-)
+fig, axes = panel_grid(len(scenes), panel=(5.2, 4.2))  # two per row, each ≥ 400 px wide
 outcome = {}
-for ax, name in zip(axes.flat, scenes, strict=False):
+for ax, name in zip(axes, scenes, strict=True):
     theta, context = EXAMPLES[name].arrays()
     task = make_task(name)
     result = task.evaluate(theta, context, workers=0)
@@ -221,17 +213,17 @@ for ax, name in zip(axes.flat, scenes, strict=False):
     ax.imshow(picture)
     for (label, px), colour in zip(pixels.items(), colours, strict=False):
         draw_path(ax, px, color=colour, label=label)
-    ax.legend(fontsize=6, loc="lower left")
+    ax.legend(fontsize=8, loc="lower left")
     verdict = (
         ("success" if result.success[0] else "no success")
         if task.has_success
         else (f"return {result.returns[0]:.1f}")
     )
     outcome[name] = bool(result.success[0])
-    ax.set_title(f"{name}: {EXAMPLES[name].what}, {verdict}", fontsize=8)
-for ax in axes.flat:
+    ax.set_title(f"{name}: {EXAMPLES[name].what}, {verdict}", fontsize=9)
     ax.axis("off")
 fig.tight_layout()
+save_figure(fig, f"tasks-episodes-{get_budget().name}")
 plt.show()
 found = [n for n, ex in EXAMPLES.items() if ex.succeeds]
 assert all(outcome[n] for n in found), "a θ found to succeed no longer does"
