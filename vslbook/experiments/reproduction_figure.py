@@ -11,7 +11,9 @@ probes left out), and beside them what the thesis says:
   words, which the claim's text gives);
 * a published curve (Chapter 5's cheetah-run) as its own grey row, at the step our runs end;
 * each claim's status in the panel's title (``met``, ``not met``, ``pending``, or ``smoke:
-  code path only``).
+  code path only``); a method without a finished run keeps its row, labelled with how far
+  its probes have trained (a claim is about a run's end, so probes are not scored here;
+  the chapter's full figures draw them).
 
 The figure's caption (:func:`~vslbook.experiments.figure_sources.annotate`) says where the
 runs came from; the chapter prints :func:`~vslbook.experiments.reproduction.claims_overview`
@@ -85,19 +87,22 @@ def _draw_panel(ax, figure: str, fs, metric: str, claims: list[Claim], reps) -> 
         rows.append((f"{label} (ours, {r.runs} seed{'s' * (r.runs != 1)})", r.iqm, r.ci_low,
                      r.ci_high, color, "ours"))  # fmt: skip
     named = dict.fromkeys(m for c in claims for m in (c.method, c.other) if m is not None)
+    probes = {m: [fs.probes[p.name] for p in ps if p.name in fs.probes]
+              for m, ps in fs.runs.items()}  # fmt: skip
     for method in named:
         if method not in set(scores["method"]):
-            rows.append((f"{method_label(method)} (ours): no finished run", np.nan, np.nan,
-                         np.nan, "0.5", "pending"))  # fmt: skip
+            training = probes.get(method) or []
+            state = (f"still training ({', '.join(training)})" if training
+                     else "no finished run")  # fmt: skip
+            rows.append((f"{method_label(method)} (ours): {state}", np.nan, np.nan, np.nan,
+                         "0.5", "pending"))  # fmt: skip
     for claim in claims:
         if claim.published is not None and claim.method in runs:
             pub = published_at(claim.published, final_step(runs[claim.method], metric), reps=reps)
             rows.append((f"published DIME ({pub['seeds']} seeds, at step {pub['step']:,.0f})",
                          pub["iqm"], pub["ci_low"], pub["ci_high"], "#555555", "published"))
     for y, (_label, iqm, lo, hi, color, kind) in enumerate(rows):
-        if kind == "pending":
-            ax.text(0.02, y, "pending", transform=ax.get_yaxis_transform(), va="center",
-                    color="0.4", fontsize=8)  # fmt: skip
+        if kind == "pending":  # the row's label says why; no marker
             continue
         ax.errorbar(iqm, y, xerr=[[iqm - lo], [hi - iqm]], fmt="o" if kind == "ours" else "s",
                     color=color, ecolor=color, capsize=4, markersize=7, lw=2)  # fmt: skip
