@@ -23,7 +23,9 @@
 Only runs that are ``DONE``, whose metrics match what ``DONE`` recorded
 (:meth:`~vslbook.results.RunDir.check_done`) and that the current code made or reproduces
 (:attr:`~vslbook.results.RunDir.code_matches`; a run made by other code is replayed first,
-:mod:`vslbook.replay`) are recorded. A set grows across machines
+:mod:`vslbook.replay`) are recorded; with ``--partial`` a run still training is recorded
+too, up to its last checkpoint, as a *probe* (``runs.csv`` status ``incomplete``), which the
+figures draw and never score. A set grows across machines
 and sessions: recording again merges with what the folder holds (the root's copy of a run
 wins) and rewrites the tables deterministically; recording the same runs twice gives the
 same bytes.
