@@ -213,7 +213,8 @@ def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path,
     from vslbook.experiments.figure_sources import PROBE_VERDICT
 
     assert replace(fs, budget="full").verdict("x") == PROBE_VERDICT
-    assert [r for r in result_rows([FIGURE]) if r["method"] == "diskill"] == []
+    (row,) = [r for r in result_rows([FIGURE]) if r["method"] == "diskill"]
+    assert (row["seeds"], row["probes"], row["iqm"]) == (0, 1, None)  # counted, never scored
 
 
 def test_annotate_puts_the_caption_under_the_figure_in_red_when_stale(tmp_path):

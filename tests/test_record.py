@@ -34,7 +34,7 @@ PROVENANCE_KEYS = {
     "code_hashes_verified", "code_excluded", "git_sha", "git_dirty", "packages", "hostname",
     "python", "platform", "started", "wall_seconds", "wall_from", "metrics", "recorded",
 }  # fmt: skip
-RESULT_KEYS = {"figure", "method", "task", "budget", "seeds", "metric", "iqm", "ci_low",
+RESULT_KEYS = {"figure", "method", "task", "budget", "seeds", "probes", "metric", "iqm", "ci_low",
                "ci_high", "stale"}  # fmt: skip
 
 
@@ -236,13 +236,13 @@ def test_results_lists_each_set_with_its_final_iqm(root, capsys):
         assert set(row) == RESULT_KEYS
         final = _final(root / r.name)
         assert row == {"figure": FIGURE, "method": r.method, "task": "hopper-jump",
-                       "budget": BUDGET, "seeds": 1, "metric": "test_return", "iqm": final,
-                       "ci_low": final, "ci_high": final, "stale": False}  # fmt: skip
+                       "budget": BUDGET, "seeds": 1, "probes": 0, "metric": "test_return",
+                       "iqm": final, "ci_low": final, "ci_high": final, "stale": False}  # fmt: skip
     capsys.readouterr()
     assert main(["results"]) == 0
     text = capsys.readouterr().out.splitlines()
-    assert text[0].split() == ["figure", "method", "task", "budget", "seeds", "metric", "IQM",
-                               "[95%", "CI]", "stale"]  # fmt: skip
+    assert text[0].split() == ["figure", "method", "task", "budget", "seeds", "probes", "metric",
+                               "IQM", "[95%", "CI]", "stale"]  # fmt: skip
     assert len(text) == 4 and all(line.startswith(FIGURE) for line in text[1:])
 
     # a recorded code fingerprint that is not today's: that method's set is stale

@@ -37,7 +37,8 @@ def _number(value: float) -> float | None:
 def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
     """One row per recorded (figure, method, budget), in figure, budget and method order.
 
-    Keys: ``figure``, ``method``, ``task``, ``budget``, ``seeds`` (runs with a final value),
+    Keys: ``figure``, ``method``, ``task``, ``budget``, ``seeds`` (finished runs with a
+    final value), ``probes`` (runs recorded while still training: counted, never scored),
     ``metric`` (the one the figure plots for the method's algorithm), ``iqm``, ``ci_low``,
     ``ci_high`` (IQM of each run's final evaluation, i.e. its last row with the metric, with
     a 95 % stratified bootstrap over seeds: seed 0, the budget's ``bootstrap_reps`` but at
@@ -54,7 +55,7 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
             if not (directory / "runs.csv").exists():
                 continue
             runs, evals, provenance = read_set(directory)
-            runs = runs[runs["status"] == "done"]  # probes are drawn, never scored
+            probes = runs[runs["status"] != "done"]  # drawn, never scored: only counted
             finals = evals[evals["value"].notna()].sort_values(["run", "step"], kind="stable")
             finals = finals.groupby(["run", "metric"]).last()  # each run's last value of each
             order = list(dict.fromkeys(r.method for r in figure_runs(figure, b)))
@@ -64,9 +65,7 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
             for method, env in pairs:  # one row per task of the figure (Fig. 3.2 has two)
                 task = task_of_env(env)
                 mine = runs[(runs["method"] == method) & (runs["env"] == env)]
-                names = sorted(mine["run"])
-                if not names:
-                    continue
+                names = sorted(mine.loc[mine["status"] == "done", "run"])
                 metric = figure_metric(figure, str(mine["algo"].iloc[0]))
                 values = np.array([finals.loc[(n, metric), "value"] for n in names
                                    if (n, metric) in finals.index])  # fmt: skip
@@ -77,9 +76,10 @@ def result_rows(figures: list[str] | None = None) -> list[dict[str, Any]]:
                     iqm, low, high = point[method][0], ci[method][0, 0], ci[method][1, 0]
                 rows.append({
                     "figure": figure, "method": method, "task": task, "budget": b.name,
-                    "seeds": len(values), "metric": metric, "iqm": _number(iqm),
+                    "seeds": len(values), "probes": int(mine["run"].isin(probes["run"]).sum()),
+                    "metric": metric, "iqm": _number(iqm),
                     "ci_low": _number(low), "ci_high": _number(high),
-                    "stale": any(entry_stale(provenance.get(n, {})) for n in names),
+                    "stale": any(entry_stale(provenance.get(n, {})) for n in mine["run"]),
                 })  # fmt: skip
     return rows
 
@@ -93,9 +93,11 @@ def results_text(rows: list[dict[str, Any]]) -> str:
     def num(x: float | None) -> str:
         return "-" if x is None else f"{x:.4g}"
 
-    head = ("figure", "method", "task", "budget", "seeds", "metric", "IQM [95% CI]", "stale")
+    head = ("figure", "method", "task", "budget", "seeds", "probes", "metric", "IQM [95% CI]",
+            "stale")  # fmt: skip
     table = [head] + [
-        (r["figure"], r["method"], r["task"], r["budget"], str(r["seeds"]), r["metric"],
+        (r["figure"], r["method"], r["task"], r["budget"], str(r["seeds"]), str(r["probes"]),
+         r["metric"],
          f"{num(r['iqm'])} [{num(r['ci_low'])}, {num(r['ci_high'])}]",
          "stale" if r["stale"] else "")
         for r in rows
