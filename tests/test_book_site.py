@@ -125,10 +125,20 @@ _OPENING = """() => {
   const sec = first && (first.tagName === 'SECTION' ? first : first.closest('section'));
   if (!sec) return null;
   const h = sec.querySelector('h2');
+  const table = Array.from(sec.querySelectorAll('.cell_output table')).find(t =>
+      Array.from(t.querySelectorAll('thead th')).some(th => th.innerText.trim() === 'status'));
+  let statuses = [];
+  if (table) {
+    const heads = Array.from(table.querySelectorAll('thead th')).map(t => t.innerText.trim());
+    const col = heads.indexOf('status');
+    statuses = Array.from(table.querySelectorAll('tbody tr'))
+        .map(tr => (tr.children[col] || {innerText: ''}).innerText.trim());
+  }
   return {heading: h ? h.innerText : '',
           images: sec.querySelectorAll('.cell_output img').length,
           columns: Array.from(sec.querySelectorAll('.cell_output table th'))
-                        .map(t => t.innerText.trim())};
+                        .map(t => t.innerText.trim()),
+          statuses: statuses};
 }"""
 
 
@@ -237,4 +247,9 @@ def _opening_problems(name: str, opening: dict | None) -> list[str]:
     if not {"claim", "status"} <= set(opening["columns"]):
         problems.append(f"{name}: 'Results at a glance' has no table of the claims (claim, "
                         f"status); its table columns: {opening['columns']}")
+    # the site is built at smoke: no claim may be judged on smoke runs
+    judged = [s for s in opening["statuses"] if s in ("met", "not met")]
+    if judged or not opening["statuses"]:
+        problems.append(f"{name}: the claims of a smoke build must read 'smoke' (code path "
+                        f"only), not a verdict; got statuses {opening['statuses']}")
     return problems
