@@ -64,3 +64,23 @@ def test_plan_reads_the_state_of_each_run(tmp_path, monkeypatch):
     assert (row.state, row.progress) == ("done", first.length)
     assert plan_text([row]).splitlines()[0] == (
         f"done     {first.name} (code changed: replayed when resumed or recorded)")
+
+
+def test_plan_estimates_from_the_recent_mean_cost(tmp_path):
+    """A partial run's hours left: its remaining iterations times the mean of its last
+    quarter's logged iteration seconds (rare costly iterations count; costs that grow, as
+    SVSL's with each expert added, are taken where they are now); a missing run of the same
+    method: the mean over every logged iteration of its method's runs."""
+    runs = figure_runs("fig4-4a", "reduced")  # three seeds of each method
+    first, second = runs[0], next(r for r in runs[1:] if r.algo == runs[0].algo)
+    run = tmp_path / first.name
+    run.mkdir()
+    (run / "config.json").write_text(json.dumps({"algo": first.algo, "env": first.env}))
+    times = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 5.0]  # the last quarter: 3 s and 5 s
+    (run / "metrics.jsonl").write_text("".join(
+        json.dumps({"step": i + 1, "iteration_seconds": t}) + "\n" for i, t in enumerate(times)))
+    rows = {r.run.name: r for r in plan("fig4-4a", "reduced", tmp_path)}
+    mine = rows[first.name]
+    assert (mine.state, mine.progress, mine.seconds_per_unit) == ("partial", 8, 4.0)
+    assert mine.hours_left == pytest.approx((first.length - 8) * 4.0 / 3600)
+    assert rows[second.name].seconds_per_unit == pytest.approx(sum(times) / len(times))

@@ -162,9 +162,13 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
     """The state of every run ``figure`` needs at ``budget`` in ``root``.
 
     ``recorded(run)`` says whether a run missing from ``root`` is in ``data/results/``.
-    A run's seconds per unit are its own median measurement, else the median of its
-    method's other runs in the plan, else of its method's recorded runs
-    (:func:`recorded_times`), else NaN (not yet measured).
+    A run's seconds per unit are the mean of its own most recent measurements (the last
+    quarter of its iterations: an SVSL iteration costs more as experts are added), else the
+    mean of its method's other runs in the plan, else of its method's recorded runs
+    (:func:`recorded_times`), else NaN (not yet measured). Means, not medians: the rare
+    costly iterations (SVSL's fine-tuning of every expert every 50th iteration, Di-SkilL's
+    tests) are part of a run's cost. A run's logged ``iteration_seconds`` leave out what
+    happens between iterations (SVSL's tests, checkpoints), so the hours are a lower bound.
     """
     runs = figure_runs(figure, budget)
     states = [_state(Path(root) / r.name, r.unit) for r in runs]
@@ -179,8 +183,8 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
     for r, (state, progress, times, note) in zip(runs, states, strict=True):
         if state == "missing" and recorded is not None and recorded(r):
             state = "recorded"
-        pool = times or by_method[(r.algo, r.env)]
-        per = statistics.median(pool) if pool and r.unit == "step" else math.nan
+        pool = times[-max(1, len(times) // 4):] if times else by_method[(r.algo, r.env)]
+        per = statistics.fmean(pool) if pool and r.unit == "step" else math.nan
         rows.append(PlanRow(r, state, progress, per, note))
     return rows
 
