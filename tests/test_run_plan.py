@@ -84,3 +84,20 @@ def test_plan_estimates_from_the_recent_mean_cost(tmp_path):
     assert (mine.state, mine.progress, mine.seconds_per_unit) == ("partial", 8, 4.0)
     assert mine.hours_left == pytest.approx((first.length - 8) * 4.0 / 3600)
     assert rows[second.name].seconds_per_unit == pytest.approx(sum(times) / len(times))
+
+
+def test_plan_keeps_only_the_runs_asked_for(capsys, tmp_path):
+    runs = figure_runs("fig4-4a", "reduced")
+    wanted = [r.name for r in runs if r.seed in (0, 2) and r.method == "bbrl"]
+    assert len(wanted) == 2
+    capsys.readouterr()
+    assert main(["plan", "fig4-4a", "--budget", "reduced", "--root", str(tmp_path),
+                 "--seeds", "0", "2", "--methods", "BBRL"]) == 0  # fmt: skip
+    lines = capsys.readouterr().out.splitlines()
+    assert [line.split()[1] for line in lines[:-1]] == wanted
+    assert lines[-1] == "0.0 core-hours left for 0 runs; 2 runs not yet timed (train one of " \
+                        "each method to estimate them)"
+    assert main(["plan", "fig4-4a", "--budget", "reduced", "--root", str(tmp_path),
+                 "--methods", "sac"]) == 2  # fmt: skip
+    assert "vslbook: error: fig4-4a at reduced draws no method 'sac'; expected one of" in \
+        capsys.readouterr().err

@@ -9,7 +9,7 @@
     vslbook sweep ALGO --env ENV [--env ENV2] --seeds 0 1 2 [--grid key=v1,v2] \
                   [--executor debug|local|slurm] [--slurm slurm.yaml] [--no-wait]
     vslbook figure ID [--budget B] [--out DIR]
-    vslbook plan FIGURE [--budget B] [--root DIR]   what a figure's runs need, core-hours left
+    vslbook plan FIGURE [--budget B] [--root DIR] [--seeds ..]  a figure's runs, core-hours left
     vslbook train FIGURE [--budget B] [--seeds ..] [--jobs N]  a figure's runs, N at once
     vslbook record FIGURE [--budget B] [--root DIR] a figure's finished runs into data/results/
     vslbook results [--json] [--verify]      recorded run sets: final IQM, 95 % CI, stale
@@ -152,11 +152,15 @@ def _parser() -> argparse.ArgumentParser:
         "state done, partial (with progress), missing, failed or recorded, noting a run "
         "made by other code (stale only if its first rows replay differently, checked when "
         "it is resumed or recorded); then the core-hours still to train, from the "
-        "per-iteration times the runs in ROOT measured.",
+        "per-iteration times the runs in ROOT measured. --seeds, --methods and --envs "
+        "keep only those runs (as vslbook train takes them).",
     )  # fmt: skip
     pl.add_argument("figure", help="a figure id (vslbook figures), e.g. fig4-3c")
     pl.add_argument("--budget", default=None)
     pl.add_argument("--root", default="runs", help="folder of run directories")
+    pl.add_argument("--seeds", type=_seed, nargs="+", default=None)
+    pl.add_argument("--methods", nargs="+", default=None, help="legend names, e.g. SVSL")
+    pl.add_argument("--envs", nargs="+", default=None, help="environment ids")
 
     tr = sub.add_parser(
         "train", help="train a figure's runs, one per process (finished ones are reused)",
@@ -318,9 +322,14 @@ def _dispatch(args: argparse.Namespace) -> int:
     if args.command == "plan":
         from vslbook.experiments.record import recorded_names
         from vslbook.experiments.run_plan import plan, plan_text
+        from vslbook.experiments.train_figure import select_runs
 
         names = recorded_names(args.figure, args.budget)
         rows = plan(args.figure, args.budget, args.root, recorded=lambda r: r.name in names)
+        if (args.seeds, args.methods, args.envs) != (None, None, None):
+            keep = {r.name for r in select_runs(args.figure, args.budget, seeds=args.seeds,
+                                                methods=args.methods, envs=args.envs)}
+            rows = [r for r in rows if r.run.name in keep]  # timed on all the figure's runs
         print(plan_text(rows))
         return 0
     if args.command == "train":
