@@ -640,11 +640,12 @@ BP.draw_learning_curves(axes[0, 1], BP.learning_curves(bp_runs, "expected_entrop
                         ylabel="expected mixture entropy (IQM)", thesis=None)  # fmt: skip
 axes[0, 1].set_title("Fig. A.1: expected entropy")
 BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
-axes[1, 0].set_title("(c) SVSL context distributions (seed 0)")
+probe = {m: bp_set.probe_note(paths[0]).replace(", ", "\n") for m, paths in bp_runs.items()}
+axes[1, 0].set_title(f"(c) SVSL context distributions (seed 0){probe['SVSL']}")
 for ax, m in zip(axes[2], ("SVSL", "HiREPS"), strict=True):
     grid = BP.success_grid(bp_models[m], grid_counts["grid"], n_draws=grid_counts["grid_draws"])
     BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0, "
-                         f"{grid_counts['grid_draws']} draws per cell)")
+                         f"{grid_counts['grid_draws']} draws per cell){probe[m]}")
 trajs = BP.ball_trajectories(bp_models["SVSL"], np.array([0.0, -1.7]),
                              n_draws=bp_counts["trajectory_draws"])  # fmt: skip
 BP.draw_ball_trajectories(axes[1, 1], trajs)

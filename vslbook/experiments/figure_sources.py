@@ -120,6 +120,12 @@ class FigureSet:
     def _paths(self) -> dict[str, Path]:
         return {p.name: p for paths in self.runs.values() for p in paths}
 
+    def probe_note(self, path: str | Path) -> str:
+        """``", probe at 300/4500 step"`` for a run still training when recorded (to put in
+        the title of a panel drawn from that one run), else ``""``."""
+        name = Path(path).name
+        return f", probe at {self.probes[name]}" if name in self.probes else ""
+
     def verdict(self, text: str) -> str:
         """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke, or
         :data:`PROBE_VERDICT` where every run is a probe."""

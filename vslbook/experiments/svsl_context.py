@@ -330,13 +330,16 @@ def draw_success_grid(
     title: str = "",
     labels: tuple[str, str] = ("x [m]", "y [m]"),
 ) -> plt.Axes:
-    """Success rates as an image over ``extent`` = (x_lo, x_hi, y_lo, y_hi) (dark: low)."""
+    """Success rates as an image over ``extent`` = (x_lo, x_hi, y_lo, y_hi) (dark: low),
+    titled ``title``'s first line with the mean success, then its other lines."""
     g = np.asarray(grid, dtype=np.float64)
     if g.ndim != 2 or not np.all((g >= 0) & (g <= 1)):
         raise ValueError(f"grid must be a 2-D array of rates in [0, 1], got shape {g.shape}")
     im = ax.imshow(g, origin="lower", extent=extent, vmin=0, vmax=1, cmap="viridis",
                    aspect="equal")  # fmt: skip
-    ax.set_title(f"{title} mean success {g.mean():.0%}".strip(), fontsize=9)
+    head, _, rest = title.partition("\n")
+    ax.set_title(f"{head} mean success {g.mean():.0%}".strip() + (f"\n{rest}" if rest else ""),
+                 fontsize=9)  # fmt: skip
     ax.set_xlabel(labels[0])
     ax.set_ylabel(labels[1])
     plt.colorbar(im, ax=ax, fraction=0.05)
