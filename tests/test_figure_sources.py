@@ -239,3 +239,10 @@ def test_annotate_puts_the_caption_under_the_figure_in_red_when_stale(tmp_path):
     assert fig.texts[-1].get_text().startswith("WARNING: recorded by code that has changed")
     assert fig.texts[-1].get_color() == "#b00020"
     plt.close(fig)
+
+
+def test_a_panel_of_one_run_can_say_it_is_a_probe(tmp_path):
+    fs = FigureSet(FIGURE, "full", {"diskill": [tmp_path / "a", tmp_path / "b"]},
+                   probes={"b": "900/4500 step"})  # fmt: skip
+    assert fs.probe_note(tmp_path / "b") == ", probe at 900/4500 step"
+    assert fs.probe_note(tmp_path / "a") == ""
