@@ -92,7 +92,7 @@ print(f"budget of the live cells: {budget.name}; {source_text()}")
 from pathlib import Path
 
 from vslbook.experiments.figure_sources import figure_set
-from vslbook.experiments.reproduction import claims_overview
+from vslbook.experiments.reproduction import claims_overview, show_claims
 from vslbook.experiments.reproduction_figure import results_figure
 
 root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, resumable
@@ -101,7 +101,8 @@ fig = results_figure(opening, reps=budget.bootstrap_reps)
 annotate(fig, *opening.values())  # where the runs came from, under the figure
 save_figure(fig, f"ch4-results-{budget.name}")
 plt.show()
-display(claims_overview(list(opening), sets=opening, reps=budget.bootstrap_reps))
+display(show_claims(claims_overview(list(opening), sets=opening,
+                                  reps=budget.bootstrap_reps)))
 
 
 # %% [markdown]

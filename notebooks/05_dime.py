@@ -89,7 +89,7 @@ print(f"budget: {budget.name} ({budget.seeds} seeds per configuration); {source_
 # the derivations.
 
 # %% tags=["full-width"]
-from vslbook.experiments.reproduction import claims_overview
+from vslbook.experiments.reproduction import claims_overview, show_claims
 from vslbook.experiments.reproduction_figure import results_figure
 
 opening = {f: chapter5_figure(f, RUNS, TABLES)[0] for f in ("fig5-3-cheetah", "fig5-ablations")}
@@ -97,7 +97,8 @@ fig = results_figure(opening, reps=budget.bootstrap_reps)
 annotate(fig, *opening.values())  # where the runs came from, under the figure
 save_figure(fig, f"ch5-results-{budget.name}")
 plt.show()
-display(claims_overview(list(opening), sets=opening, reps=budget.bootstrap_reps))
+display(show_claims(claims_overview(list(opening), sets=opening,
+                                  reps=budget.bootstrap_reps)))
 
 
 # %% [markdown]

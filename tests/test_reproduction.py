@@ -142,3 +142,17 @@ def test_overview_reads_each_figures_runs(monkeypatch, tmp_path):
     assert list(table["status"]) == ["met", "pending"]
     assert list(table["runs"]) == ["recorded, full", "recorded, full"]
     assert table["seeds"].iloc[0] == "SVSL 2"
+
+
+def test_the_claims_table_shows_every_claim_in_full():
+    import pandas as pd
+
+    from vslbook.experiments.reproduction import STATUS_COLOURS, show_claims
+
+    claim = "beer pong: " + "a long claim " * 10
+    table = pd.DataFrame([{"figure": "fig3-2", "claim": claim, "status": "not met",
+                           "seeds": "SVSL 3", "runs": "recorded, full"}])  # fmt: skip
+    html = show_claims(table).to_html()
+    assert claim in html and STATUS_COLOURS["not met"] in html
+    with pytest.raises(ValueError, match=r"not a claims table \(missing columns \['figure'"):
+        show_claims(pd.DataFrame({"a": [1]}))

@@ -43,6 +43,7 @@ Suites and the recipes used (Appendix C.3, Table C.1):
 
 from __future__ import annotations
 
+import logging
 import warnings
 from dataclasses import dataclass
 from typing import Any, Literal
@@ -196,10 +197,24 @@ class SuccessInfo(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, reward, terminated, truncated, {**info, "success": bool(info[self.key])}
 
 
+class _DeprecatedMjcfAttributes(logging.Filter):
+    """Drops dm_control's warning that an MJCF attribute of its own models is deprecated
+    (``compiler attribute 'settotalmass' is deprecated``), logged once per environment
+    made: a page of them would stand in every notebook output that builds a DMC task."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "is deprecated and will be removed" not in record.getMessage()
+
+
+_MJCF_FILTER = _DeprecatedMjcfAttributes()
+
+
 def _import_suite(suite: Suite) -> None:
     """Import the package that registers a suite's gymnasium ids, only when it is needed."""
     if suite == "dmc":
         import shimmy  # noqa: F401  (registers dm_control/<domain>-<task>-v0)
+
+        logging.getLogger("absl").addFilter(_MJCF_FILTER)  # once: the same filter object
     elif suite == "myo":
         try:
             import myosuite  # noqa: F401  (registers the myo* ids)

@@ -36,7 +36,8 @@ import pandas as pd
 from vslbook.results import RunDir
 
 __all__ = ["CLAIMS", "KINDS", "THESIS_NUMBERS", "Claim", "claims_overview", "final_scores",
-           "claim_runs", "final_step", "published_at", "reproduction_text", "verdicts"]  # fmt: skip
+           "claim_runs", "final_step", "published_at", "reproduction_text", "show_claims",
+           "verdicts"]  # fmt: skip
 
 #: the kinds of claim :func:`verdicts` checks
 KINDS = ("at_least", "above", "within_or_above", "within_or_above_published")
@@ -270,3 +271,19 @@ def claims_overview(figures: list[str], budget=None, root: str | Path = "runs", 
                          "seeds": ", ".join(f"{m} {n}" for m, n in v.seeds.items()) or "-",
                          "runs": f"{origin}, {fs.budget}"})  # fmt: skip
     return pd.DataFrame(rows, columns=["figure", "claim", "status", "seeds", "runs"])
+
+
+#: a claim's status → its cell colour in :func:`show_claims`
+STATUS_COLOURS = {"met": "#d8f0d8", "not met": "#f6d5d5", "pending": "#eeeeee",
+                  "smoke": "#eeeeee", "not logged": "#fbeccc"}  # fmt: skip
+
+
+def show_claims(table: pd.DataFrame):
+    """:func:`claims_overview`'s table for a notebook: every claim in full (a DataFrame's
+    display cuts long text), left-aligned, without the index, each status coloured."""
+    missing = [c for c in ("figure", "claim", "status", "seeds", "runs") if c not in table]
+    if missing:
+        raise ValueError(f"show_claims: not a claims table (missing columns {missing})")
+    return (table.style.hide(axis="index")
+            .map(lambda s: f"background-color: {STATUS_COLOURS.get(s, '')}", subset=["status"])
+            .set_properties(**{"text-align": "left", "white-space": "normal"}))  # fmt: skip
