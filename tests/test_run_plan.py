@@ -76,13 +76,13 @@ def test_plan_estimates_from_the_recent_mean_cost(tmp_path):
     run = tmp_path / first.name
     run.mkdir()
     (run / "config.json").write_text(json.dumps({"algo": first.algo, "env": first.env}))
-    times = [1.0, 1.0, 1.0, 1.0, 1.0, 1.0, 3.0, 5.0]  # the last quarter: 3 s and 5 s
+    times = [1.0] * 9 + [2.0, 3.0, 7.0]  # the last quarter: mean 4 s (median 3 s)
     (run / "metrics.jsonl").write_text("".join(
         json.dumps({"step": i + 1, "iteration_seconds": t}) + "\n" for i, t in enumerate(times)))
     rows = {r.run.name: r for r in plan("fig4-4a", "reduced", tmp_path)}
     mine = rows[first.name]
-    assert (mine.state, mine.progress, mine.seconds_per_unit) == ("partial", 8, 4.0)
-    assert mine.hours_left == pytest.approx((first.length - 8) * 4.0 / 3600)
+    assert (mine.state, mine.progress, mine.seconds_per_unit) == ("partial", 12, 4.0)
+    assert mine.hours_left == pytest.approx((first.length - 12) * 4.0 / 3600)
     assert rows[second.name].seconds_per_unit == pytest.approx(sum(times) / len(times))
 
 
