@@ -224,6 +224,10 @@ class BeerPong(EpisodicTask):
         # step) are those with the ball inside a box around one of these geoms, grown by the
         # ball's radius + 1 cm (boxes of the episode's cup position, :meth:`_near_boxes`).
         self._near_geoms = np.unique(np.r_[self.contact_geoms, self._floor_geom])
+        # geom id -> whether it is one of contact_geoms: a lookup per contact list instead of
+        # np.isin, which cost more than the contact recomputation it follows
+        self._is_contact_geom = np.zeros(m.ngeom, dtype=bool)
+        self._is_contact_geom[self.contact_geoms] = True
         self._near_grow = m.geom_rbound[self._ball_geom] + m.geom_margin[self._ball_geom] + 0.01
         self._vel = np.zeros(6)
         self._probe = mujoco.MjData(m)  # recomputes the contacts of recorded states
@@ -272,9 +276,7 @@ class BeerPong(EpisodicTask):
         g = d.contact.geom[: d.ncon]
         ball = (g == self._ball_geom).any(axis=1)
         other = np.where(g[:, 0] == self._ball_geom, g[:, 1], g[:, 0])[ball]
-        return bool((other == self._floor_geom).any()), bool(
-            np.isin(other, self.contact_geoms).any()
-        )
+        return bool((other == self._floor_geom).any()), bool(self._is_contact_geom[other].any())
 
     # -- episodes -----------------------------------------------------------------------
     def episode(self, theta: np.ndarray, context: np.ndarray) -> Episode:
