@@ -1270,9 +1270,10 @@ display(side.round(1))
 # %% tags=["full-width"]
 # 5050 env steps at `smoke`, 8000 at `reduced`, 100k at `full`; budget.seeds seeds
 variants = RUN_SETS["ablations"].variants
-print({k: v for k, v in RUN_SETS["ablations"].common.items() if k in ("total_steps", "eval_every")})
 fs_abl, abl = chapter5_figure("fig5-ablations", RUNS, TABLES)
 print(fs_abl.caption())
+print("env steps of each run drawn:", sorted({r.length for r in figure_runs("fig5-ablations",
+                                                                          fs_abl.budget)}))
 rows_all = abl.curve_rows()
 curves = {label: iqm_curve(rows_all[rows_all.variant == label], x="step", y="value", run="run",
                            reps=budget.bootstrap_reps) for label in variants}
