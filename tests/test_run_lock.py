@@ -171,3 +171,23 @@ def test_a_missing_env_json_means_unknown_code(tmp_path, capsys):
     assert main([*PG, "--root", str(tmp_path / "runs")]) == 0
     assert "was made by other code" in capsys.readouterr().out
     assert RunDir.open(rd.path).done and (rd.path / "env.json").is_file()
+
+
+def test_a_refusal_names_a_holder_that_has_not_written_its_name_yet(tmp_path):
+    """The holder takes the lock, then writes its name tag: a process refused in between
+    reads the tag again until it is there, instead of naming pid "?"."""
+    import fcntl
+    import threading
+
+    (tmp_path / "r").mkdir()
+    fd = os.open(tmp_path / "r" / "LOCK", os.O_RDWR | os.O_CREAT, 0o644)
+    fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)  # taken, the tag not written yet
+    tag = json.dumps({"pid": 4242, "host": "elsewhere", "since": time.time()})
+    late = threading.Timer(0.3, lambda: os.pwrite(fd, tag.encode(), 0))
+    late.start()
+    try:
+        with pytest.raises(RunLockedError, match="being trained by pid 4242 on host elsewhere"):
+            RunLock(tmp_path / "r").acquire()
+    finally:
+        late.join()
+        os.close(fd)

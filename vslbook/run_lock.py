@@ -34,11 +34,23 @@ class RunLockedError(RuntimeError):
     """Another process holds the run directory's lock (its pid and host in the message)."""
 
 
-def _holder(path: Path) -> str:
-    """Who holds the lock at ``path``, as recorded in it ("pid 12 on host h since ...")."""
-    try:
-        info = json.loads(path.read_text(encoding="utf-8") or "{}")
-    except (OSError, ValueError):
+def _holder(path: Path, patience: float = 1.0) -> str:
+    """Who holds the lock at ``path``, as recorded in it ("pid 12 on host h since ...").
+
+    A holder writes its name tag just after it takes the lock, so a process that finds the
+    lock taken may read the file between the two, empty or cut short: it reads again for up
+    to ``patience`` seconds before it settles for what is there.
+    """
+    deadline = time.monotonic() + patience
+    while True:
+        try:
+            info = json.loads(path.read_text(encoding="utf-8") or "{}")
+        except (OSError, ValueError):
+            info = None
+        if (info and "pid" in info) or time.monotonic() >= deadline:
+            break
+        time.sleep(0.02)
+    if info is None:
         return "an unknown process"
     since = info.get("since")
     when = time.strftime("%Y-%m-%d %H:%M:%S", time.localtime(since)) if since else "?"
