@@ -26,6 +26,9 @@ the initial model, whose table-tennis θ are mostly rejected without simulation)
 ``--side-by-side`` instead compares throughputs on two cores: two seeds at once with one
 worker each against one seed with two workers (each in its own process, both started
 together after their warm-up), and prints iterations per second of each and the ratio.
+With physics p and networks n per iteration on one core, that ratio is at most
+(p + 2n)/(p + n) = 1 + the networks' share, plus what two workers lose to uneven episodes
+and messages: faster networks make side by side gain less.
 
     python benchmarks/diskill_iteration.py --tasks table-tennis-4d reacher5 --iterations 3
     python benchmarks/diskill_iteration.py --workers 2 --clock wall
