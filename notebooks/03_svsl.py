@@ -622,10 +622,9 @@ print(bp_set.caption())
 bp_runs = bp_set.runs  # method -> run directories
 bp_counts = BP.beer_pong_counts(bp_set.budget)
 print("counts of these runs:", bp_counts)
-# the grids drawn here: 100 draws on 13 x 20 cells (full) take minutes per model, so a
-# recorded full run is drawn on the reduced grid; its final number (grid_success, below)
-# was measured on the full grid when it was trained
-grid_counts = BP.beer_pong_counts("reduced" if bp_set.budget == "full" else bp_set.budget)
+# Fig. 3.2e/f: a finished run logged its final grid (100 draws on 13 x 20 cells at full,
+# minutes per model), which is drawn as logged; a probe is drawn from its checkpoint on
+# the reduced grid (BP.drawn_grid)
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 
@@ -644,9 +643,9 @@ BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
 probe = {m: bp_set.probe_note(paths[0]).replace(", ", "\n") for m, paths in bp_runs.items()}
 axes[1, 0].set_title(f"(c) SVSL context distributions (seed 0){probe['SVSL']}")
 for ax, m in zip(axes[2], ("SVSL", "HiREPS"), strict=True):
-    grid = BP.success_grid(bp_models[m], grid_counts["grid"], n_draws=grid_counts["grid_draws"])
+    grid, how = BP.drawn_grid(bp_runs[m][0], bp_set.budget)
     BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0, "
-                         f"{grid_counts['grid_draws']} draws per cell){probe[m]}")
+                         f"{how}){probe[m]}")
 trajs = BP.ball_trajectories(bp_models["SVSL"], np.array([0.0, -1.7]),
                              n_draws=bp_counts["trajectory_draws"])  # fmt: skip
 BP.draw_ball_trajectories(axes[1, 1], trajs)

@@ -237,6 +237,55 @@ def test_every_method_logs_its_final_grid_success(smoke_runs, monkeypatch):
         assert [r for r in rows[:-1] if "grid_success" in r] == [], method
         grid = B.success_grid(B.load_model(path), counts["grid"], n_draws=counts["grid_draws"])
         assert rows[-1]["grid_success"] == pytest.approx(grid.mean()), method
+        # and every cell, named by column (x) and row (y): smoke's grid is 2 x 3 cells
+        assert grid.shape == (3, 2)
+        for iy, ix in [(0, 0), (2, 1), (1, 0)]:
+            assert rows[-1][f"grid_success_x{ix:02d}_y{iy:02d}"] == grid[iy, ix], method
+        assert sum(k.startswith("grid_success_x") for k in rows[-1]) == 6, method
+
+
+@pytest.mark.slow
+def test_a_finished_runs_grid_is_drawn_as_logged_and_a_probes_from_its_checkpoint(
+    smoke_runs, monkeypatch, tmp_path
+):
+    """Fig. 3.2e/f draws a finished run's logged grid without loading its model; a run
+    whose last row has no grid (a probe, an older run) is drawn from its checkpoint."""
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    (path,) = smoke_runs["HiREPS"]
+    counts = B.beer_pong_counts("smoke")
+    expected = B.success_grid(B.load_model(path), counts["grid"], n_draws=counts["grid_draws"])
+
+    with monkeypatch.context() as mp:  # the logged grid needs no model
+        mp.setattr(B, "load_model", lambda p: pytest.fail("loaded a model"))
+        grid, how = B.drawn_grid(path, "smoke")
+    np.testing.assert_array_equal(grid, expected)
+    assert how == "final model, 2 draws per cell"
+
+    import json
+    import shutil
+
+    older = tmp_path / path.name
+    shutil.copytree(path, older)
+    rows = [json.loads(line) for line in (older / "metrics.jsonl").read_text().splitlines()]
+    rows[-1] = {k: v for k, v in rows[-1].items() if k != "grid_success_x01_y02"}
+    (older / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    (older / "DONE").unlink()
+    grid, how = B.drawn_grid(older, "smoke")
+    np.testing.assert_array_equal(grid, expected)
+    assert how == "2 draws per cell"
+
+
+def test_grid_metrics_round_trip_and_bad_cells():
+    cells = np.array([[0.0, 0.5, 1.0], [0.25, 0.75, 0.5]])  # 2 rows (y) of 3 cells (x)
+    metrics = B.grid_metrics(cells)
+    assert metrics["grid_success"] == pytest.approx(3.0 / 6)
+    assert metrics["grid_success_x02_y00"] == 1.0 and metrics["grid_success_x00_y01"] == 0.25
+    assert len(metrics) == 7
+    np.testing.assert_array_equal(B.logged_grid(metrics, (3, 2)), cells)
+    assert B.logged_grid(metrics, (3, 3)) is None  # a row y = 2 was never logged
+    assert B.logged_grid({"grid_success": 0.5}, (3, 2)) is None
+    with pytest.raises(ValueError, match=r"\(n_y, n_x\) array, got shape \(3,\)"):
+        B.grid_metrics([0.1, 0.2, 0.3])
 
 
 def test_env_ids_name_the_tasks():

@@ -250,11 +250,12 @@ def ppo_defaults(env: str, budget: Budget, overrides: dict[str, Any]) -> PPORun:
 # --------------------------------------------------------------------------------------
 def final_metrics(task_name: str, budget: Budget) -> Callable[[Any], dict[str, float]] | None:
     """What a Chapter 3 run adds to its last row, as ``final(model) -> metrics``; None
-    where nothing. On beer pong: ``grid_success``, Fig. 3.2e/f's success over the cup box
-    (the mean over the grid's cells of the success of the means of experts drawn from
-    π(o | c), :func:`vslbook.experiments.svsl_beer_pong.success_grid`, with the budget's
-    grid and draws: 13 × 20 cells of 100 draws at ``full``, as the thesis describes), the
-    number the thesis reports as 92 % (SVSL) and 75 % (HiREPS)."""
+    where nothing. On beer pong: Fig. 3.2e/f's success over the cup box, each cell's
+    success of the means of experts drawn from π(o | c)
+    (:func:`vslbook.experiments.svsl_beer_pong.success_grid`, with the budget's grid and
+    draws: 13 × 20 cells of 100 draws at ``full``, as the thesis describes) and their mean
+    ``grid_success``, the number the thesis reports as 92 % (SVSL) and 75 % (HiREPS)
+    (:func:`vslbook.experiments.svsl_beer_pong.grid_metrics`)."""
     if task_name != "beer-pong":
         return None
     from vslbook.experiments import svsl_beer_pong as BP
@@ -263,7 +264,7 @@ def final_metrics(task_name: str, budget: Budget) -> Callable[[Any], dict[str, f
 
     def final(model: Any) -> dict[str, float]:
         grid = BP.success_grid(model, counts["grid"], n_draws=counts["grid_draws"])
-        return {"grid_success": float(grid.mean())}
+        return BP.grid_metrics(grid)
 
     return final
 

@@ -104,9 +104,10 @@ def draw_fig_3_2(budget: Budget | str | None = None, root: str | Path = "runs",
     """Fig. 3.2 (Section 3.4.2): (a) beer pong's and (b) table tennis's test return against
     executed episodes (IQM and 95 % CI over seeds) for SVSL, HiREPS and LaDiPS, and (e, f)
     SVSL's and HiREPS's success over the cup box (seed 0; the means of experts drawn from
-    π(o | c)). A recorded full run is drawn on the reduced grid (100 draws on 13 × 20 cells
-    take minutes per model); its final number on the full grid (``grid_success``) and the
-    thesis's claims are printed by :func:`vslbook.experiments.reproduction.reproduction_text`.
+    π(o | c)): a finished run's final grid as it logged it, a probe's from its checkpoint
+    on the reduced grid (:func:`vslbook.experiments.svsl_beer_pong.drawn_grid`). The
+    grids' mean (``grid_success``) and the thesis's claims are printed by
+    :func:`vslbook.experiments.reproduction.reproduction_text`.
     """
     from vslbook.experiments import svsl_beer_pong as BP
     from vslbook.experiments import svsl_table_tennis as TT
@@ -114,17 +115,15 @@ def draw_fig_3_2(budget: Budget | str | None = None, root: str | Path = "runs",
     use_style()
     bp = _set("fig3-2", budget, root, progress, envs=(BP.ENV,))
     tt = _set("fig3-2", budget, root, progress, envs=(TT.ENV,))
-    grid = BP.beer_pong_counts("reduced" if bp.budget == "full" else bp.budget)
     fig, axes = panel_grid(4, panel=(5.5, 4.2))
     BP.draw_learning_curves(axes[0], BP.learning_curves(bp.runs), thesis=None)
     axes[0].set_title(f"(a) beer pong: test return ({bp.budget})")
     TT.draw_learning_curves(axes[1], TT.learning_curves(tt.runs), thesis=None)
     axes[1].set_title(f"(b) table tennis: test return ({tt.budget})")
     for ax, method, panel in zip(axes[2:], ("SVSL", "HiREPS"), "ef", strict=True):
-        model = BP.load_model(bp.runs[method][0])
-        cells = BP.success_grid(model, grid["grid"], n_draws=grid["grid_draws"])
+        cells, how = BP.drawn_grid(bp.runs[method][0], bp.budget)
         BP.draw_success_grid(ax, cells, title=f"({panel}) {method}: success over the cup box "
-                             f"(seed 0, {grid['grid_draws']} draws per cell)")  # fmt: skip
+                             f"(seed 0, {how})")  # fmt: skip
     fig.suptitle("Fig. 3.2 (ours; thesis: 20 seeds, success 92 % for SVSL and 75 % for HiREPS)",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()

@@ -57,6 +57,7 @@ from vslbook.experiments.svsl_mixtures import (
     mixture_of,
     svsl_episodes,
 )
+from vslbook.results import RunDir
 
 __all__ = [
     "ENV",
@@ -70,9 +71,13 @@ __all__ = [
     "draw_context_coverage",
     "draw_success_grid",
     "draw_learning_curves",
+    "drawn_grid",
+    "GRID_CELL",
     "grid_contexts",
+    "grid_metrics",
     "learning_curves",
     "load_model",
+    "logged_grid",
     "method_config",
     "mixture_of",
     "run_all",
@@ -227,6 +232,60 @@ def success_grid(
     cup, shape (n_y, n_x) (row 0 at the smallest y).
     """
     return mx.success_grid(TASK, model, shape, n_draws=n_draws, seed=seed)
+
+
+#: a cell of Fig. 3.2e/f's grid in a run's last row (:func:`grid_metrics`): column ix
+#: (along x), row iy (along y)
+GRID_CELL = "grid_success_x{ix:02d}_y{iy:02d}"
+
+
+def grid_metrics(cells: np.ndarray) -> dict[str, float]:
+    """Fig. 3.2e/f's grid as metrics for a run's last row: ``grid_success``, the mean over
+    the cells (the number the thesis reports as 92 % and 75 %), and every cell's success
+    rate as its own metric (:data:`GRID_CELL`), so that a recorded run keeps its grid.
+
+    Args:
+        cells: the success rates, shape (n_y, n_x), as :func:`success_grid` returns them.
+    """
+    grid = np.asarray(cells, dtype=np.float64)
+    if grid.ndim != 2 or grid.size == 0:
+        raise ValueError(f"cells must be a non-empty (n_y, n_x) array, got shape {grid.shape}")
+    out = {"grid_success": float(grid.mean())}
+    for iy, ix in np.ndindex(*grid.shape):
+        out[GRID_CELL.format(ix=ix, iy=iy)] = float(grid[iy, ix])
+    return out
+
+
+def logged_grid(row: dict[str, Any], shape: tuple[int, int]) -> np.ndarray | None:
+    """The grid of ``shape`` = (n_x, n_y) cells that a run's last ``row`` holds
+    (:func:`grid_metrics`), shape (n_y, n_x); None where the row lacks any of its cells
+    (a probe, or a run made before the cells were logged)."""
+    n_x, n_y = shape
+    names = [[GRID_CELL.format(ix=ix, iy=iy) for ix in range(n_x)] for iy in range(n_y)]
+    if any(row.get(name) is None for line in names for name in line):
+        return None
+    return np.array([[float(row[name]) for name in line] for line in names])
+
+
+def drawn_grid(path: str | Path, budget: Budget | str) -> tuple[np.ndarray, str]:
+    """Fig. 3.2e/f's grid for the run at ``path`` (trained at ``budget``) and a note on how
+    it was made.
+
+    A finished run logged its final model's grid at the budget's cells and draws (13 × 20
+    cells of 100 draws at ``full``, :func:`vslbook.experiments.ch3_algorithms.final_metrics`),
+    so the grid drawn is the logged one. Otherwise (a probe, or a run made before the cells
+    were logged) it is computed from the run's checkpoint, for a full run on the reduced
+    grid: 100 draws on 13 × 20 cells take minutes per model.
+    """
+    b = get_budget(budget)
+    counts = beer_pong_counts(b)
+    rows = RunDir.open(path).metrics()
+    grid = logged_grid(rows[-1], counts["grid"]) if rows else None
+    if grid is not None:
+        return grid, f"final model, {counts['grid_draws']} draws per cell"
+    counts = beer_pong_counts("reduced" if b.name == "full" else b)
+    grid = success_grid(load_model(path), counts["grid"], n_draws=counts["grid_draws"])
+    return grid, f"{counts['grid_draws']} draws per cell"
 
 
 def draw_success_grid(ax: plt.Axes, grid: np.ndarray, title: str = "") -> plt.Axes:
