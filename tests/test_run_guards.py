@@ -4,6 +4,7 @@ the runs they could not use; a finished run is reused only by the code that prod
 import hashlib
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -156,7 +157,7 @@ def test_finished_run_is_reused_only_by_the_same_code(tmp_path, capsys):
     fresh = run("dime", ENV, 0, "smoke", **kwargs)
     assert fresh.path == first.path and fresh.done and fresh.code_matches
     # the re-run records the algorithm's code scope like any new run
-    assert fresh.env["code_excluded"] == sorted(("erl/", "envs/robot/"))
+    assert fresh.env["code_excluded"] == sorted(("erl/", "envs/robot/", "experiments/"))
     moved = list((tmp_path / "_stale").iterdir())
     assert len(moved) == 1 and RunDir.open(moved[0]).code_hash == "0" * 64
     out = capsys.readouterr().out
@@ -194,7 +195,8 @@ def test_code_identity_covers_only_the_code_a_run_can_reach(tmp_path):
     rd = run("dime", ENV, 0, "smoke", root=tmp_path, overrides=TINY, progress=False)
     env = json.loads((rd.path / "env.json").read_text())
     assert env["code_excluded"] == sorted(get_algorithm("dime").independent_of)
-    assert rd.code_matches and env["code_hash"] == code_fingerprint(("erl/", "envs/robot/"))
+    assert rd.code_matches
+    assert env["code_hash"] == code_fingerprint(("erl/", "envs/robot/", "experiments/"))
     # Leaving out existing files changes the hash; the bare call still covers erl/.
     assert code_fingerprint() != code_fingerprint(("erl/",))
     assert set(NOT_RUN_CODE) >= {"data.py", "figures.py", "plots.py", "stats.py"}
@@ -221,7 +223,71 @@ def test_dime_runs_import_nothing_they_declare_independent_of(tmp_path):
                          check=True, env={**__import__("os").environ, "OMP_NUM_THREADS": "1"})
     loaded = json.loads(out.stdout.strip().splitlines()[-1])
     assert "vslbook.srl.dime" in loaded
-    assert not [m for m in loaded if m.startswith(("vslbook.erl", "vslbook.envs.robot"))]
+    assert not [m for m in loaded
+                if m.startswith(("vslbook.erl", "vslbook.envs.robot", "vslbook.experiments"))]
+
+
+@pytest.mark.slow
+def test_the_experiments_modules_runs_load_are_part_of_their_code_identity(tmp_path):
+    # experiments/ holds analysis and run code: every module of it that a Chapter 3 or 4
+    # run loads, trained in a fresh interpreter, must be in RUN_EXPERIMENTS, or editing it
+    # would never mark the run's numbers stale. erl-pg loads none.
+    import subprocess
+    import sys
+
+    from vslbook.provenance import RUN_EXPERIMENTS
+
+    runs = [("svsl", "vslbook/BeerPong-v0"), ("hireps", "vslbook/BeerPong-v0"),
+            ("ladips", "vslbook/TableTennisCh3-v0"), ("ppo", "vslbook/Reacher5Ch3Step-v0"),
+            ("diskill", "vslbook/Reacher5-v0"),
+            ("ppo-ch4", "vslbook/Reacher5SparseStep-v0")]  # fmt: skip
+    script = (
+        "import sys, json\n"
+        "from vslbook.training import run\n"
+        f"for algo, env in {runs!r}:\n"
+        f"    run(algo, env, 0, 'smoke', root={str(tmp_path)!r}, progress=False)\n"
+        "print(json.dumps(sorted(m for m in sys.modules if m.startswith('vslbook.'))))\n"
+    )
+    env = {**__import__("os").environ, "OMP_NUM_THREADS": "1", "VSLBOOK_WORKERS": "0"}
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                         check=True, env=env)  # fmt: skip
+    loaded = json.loads(out.stdout.strip().splitlines()[-1])
+    used = {m.removeprefix("vslbook.").replace(".", "/") + ".py"
+            for m in loaded if m.startswith("vslbook.experiments.")}  # fmt: skip
+    assert {"experiments/ch3_algorithms.py", "experiments/svsl_beer_pong.py"} <= used
+    assert sorted(used - set(RUN_EXPERIMENTS)) == []
+
+
+def test_editing_run_code_in_experiments_changes_the_code_identity(tmp_path):
+    import shutil
+
+    import vslbook
+    from vslbook.provenance import package_fingerprint
+
+    package = tmp_path / "vslbook"
+    shutil.copytree(Path(vslbook.__file__).parent, package,
+                    ignore=shutil.ignore_patterns("__pycache__"))  # fmt: skip
+    before = package_fingerprint(package)
+
+    def edited(rel: str) -> str:
+        path = package / rel
+        text = path.read_text()
+        path.write_text(text + "\n# an edit\n")
+        try:
+            return package_fingerprint.__wrapped__(package)
+        finally:
+            path.write_text(text)
+
+    assert edited("experiments/svsl_mixtures.py") != before  # a run loop's tests
+    assert edited("experiments/ch4_algorithms.py") != before
+    assert edited("erl/svsl.py") != before
+    assert edited("experiments/figure_draws.py") == before  # figures only
+    assert edited("plots.py") == before
+    # an algorithm's scope leaves its unreachable code out, run code of experiments/ too
+    scoped = package_fingerprint.__wrapped__(package, ("experiments/",))
+    path = package / "experiments/svsl_mixtures.py"
+    path.write_text(path.read_text() + "\n# an edit\n")
+    assert package_fingerprint.__wrapped__(package, ("experiments/",)) == scoped
 
 
 # ------------------------------------------------------------------ divergence on the device

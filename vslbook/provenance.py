@@ -19,7 +19,10 @@ from importlib import metadata
 from pathlib import Path
 from typing import Any
 
-__all__ = ["NOT_RUN_CODE", "TRACKED_PACKAGES", "code_fingerprint", "environment"]
+__all__ = [
+    "NOT_RUN_CODE", "RUN_EXPERIMENTS", "TRACKED_PACKAGES", "code_fingerprint", "environment",
+    "package_fingerprint",
+]  # fmt: skip
 
 #: distributions whose versions go into ``env.json`` (import name -> distribution name)
 TRACKED_PACKAGES = {
@@ -63,9 +66,26 @@ def _git_dirty() -> bool | None:
 
 #: Package paths no training run reads: analysis, figures and the notebooks' numerical checks;
 #: and ``progress.py``, which training loops call only to show their progress bars.
-#: Editing them never makes a run stale (:func:`code_fingerprint`).
+#: Editing them never makes a run stale (:func:`code_fingerprint`). ``experiments/`` holds
+#: both analysis and run code; the modules of it that runs execute are
+#: :data:`RUN_EXPERIMENTS` and count as run code.
 NOT_RUN_CODE: tuple[str, ...] = (
     "bounds/", "data.py", "experiments/", "figures.py", "plots.py", "progress.py", "stats.py",
+)  # fmt: skip
+
+#: The modules of ``experiments/`` that training runs execute: the run loops of Chapters 3
+#: and 4 and what they call (the figures' counts and presets, the test contexts, the entropy
+#: probes, Fig. 3.2e/f's final grid). Editing one of them can change what a run logs, so
+#: they are part of :func:`code_fingerprint`. ``tests/test_run_guards.py`` trains smoke
+#: runs of every algorithm family in a fresh process and checks that each module of
+#: ``experiments/`` it loaded is listed here.
+RUN_EXPERIMENTS: tuple[str, ...] = tuple(
+    f"experiments/{name}.py"
+    for name in (
+        "ch3_algorithms", "ch4_algorithms", "diskill_runs", "svsl_beer_pong", "svsl_context",
+        "svsl_mixtures", "svsl_planar", "svsl_reacher", "svsl_table_tennis",
+        "svsl_table_tennis_4d",
+    )
 )  # fmt: skip
 
 
@@ -74,22 +94,25 @@ def code_fingerprint(exclude: tuple[str, ...] | list[str] = ()) -> str:
 
     It names the code that produced a run independently of git: an uncommitted edit
     changes it, a commit that touches only notebooks or docs does not. Files under
-    :data:`NOT_RUN_CODE` and under ``exclude`` (package-relative prefixes such as
-    ``"erl/"``: code an algorithm's runs cannot reach, declared by the algorithm's registry
-    entry) are left out, so adding Chapter 3 code does not make Chapter 5 runs stale.
-    Computed once per process and scope, so it names the code this process loaded, even if
-    files change on disk later.
+    ``exclude`` (package-relative prefixes such as ``"erl/"``: code an algorithm's runs
+    cannot reach, declared by the algorithm's registry entry) are left out, so adding
+    Chapter 3 code does not make Chapter 5 runs stale; so are those under
+    :data:`NOT_RUN_CODE`, except the run code of :data:`RUN_EXPERIMENTS`. Computed once
+    per process and scope, so it names the code this process loaded, even if files change
+    on disk later.
     """
-    return _fingerprint(tuple(sorted(set(NOT_RUN_CODE) | set(exclude))))
+    return package_fingerprint(Path(__file__).resolve().parent, tuple(sorted(set(exclude))))
 
 
 @functools.lru_cache(maxsize=16)
-def _fingerprint(skip: tuple[str, ...]) -> str:
-    package = Path(__file__).resolve().parent
+def package_fingerprint(package: Path, exclude: tuple[str, ...] = ()) -> str:
+    """:func:`code_fingerprint` of the package at ``package`` (a copy of ``vslbook/``)."""
     digest = hashlib.sha256()
     for path in sorted(package.rglob("*.py")):
         rel = path.relative_to(package).as_posix()
-        if rel.startswith(skip):
+        if rel.startswith(exclude) or (
+            rel.startswith(NOT_RUN_CODE) and rel not in RUN_EXPERIMENTS
+        ):
             continue
         digest.update(rel.encode("utf-8") + b"\0")
         digest.update(path.read_bytes() + b"\0")

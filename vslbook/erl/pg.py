@@ -171,5 +171,5 @@ register_algorithm(
     config=ERLPGConfig,
     envs=("vslbook/PointReach-v0",),
     doc="episode-based policy gradient with a value baseline (Eq. 2.33), linear-Gaussian policy",
-    independent_of=("srl/",),
+    independent_of=("srl/", "experiments/"),
 )

@@ -65,7 +65,7 @@ __all__ = [
 ]
 
 #: Chapter 5's runs never import the episodic (Chapters 2-4) code.
-NOT_SRL = ("erl/", "envs/robot/")
+NOT_SRL = ("erl/", "envs/robot/", "experiments/")
 
 register_algorithm(
     "dime",
