@@ -1263,12 +1263,12 @@ display(side.round(1))
 # | CrossQ | the baseline of Figs. 5.2–5.3 | `crossq` (Table C.3) |
 #
 # The runs keep Table C.2's 5000 uniform exploration steps, so learning starts at step 5000;
-# how long they run after that is the budget's choice (50 steps at `smoke`, 3000 at
+# how long they run after that is the budget's choice (50 steps at `smoke`, 10,000 at
 # `reduced`). With three seeds of a small network these panels show that every switch trains
 # and which way it points on this task, not the thesis's rankings.
 
 # %% tags=["full-width"]
-# 5050 env steps at `smoke`, 8000 at `reduced`, 100k at `full`; budget.seeds seeds
+# 5050 env steps at `smoke`, 15,000 at `reduced`, 100k at `full`; budget.seeds seeds
 variants = RUN_SETS["ablations"].variants
 fs_abl, abl = chapter5_figure("fig5-ablations", RUNS, TABLES)
 print(fs_abl.caption())

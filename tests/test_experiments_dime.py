@@ -76,7 +76,7 @@ def test_run_variants_rejects_bad_arguments(tmp_path):
 @pytest.mark.parametrize(
     ("budget", "env_steps", "seeds"),
     [("smoke", {"ablations": 5_050, "pointmass": 5_050}, 2),
-     ("reduced", {"ablations": 8_000, "pointmass": 10_000}, 3),
+     ("reduced", {"ablations": 15_000, "pointmass": 10_000}, 3),
      ("full", {"ablations": 100_000, "pointmass": 100_000}, 10)],
 )  # fmt: skip
 def test_chapter5_run_sets_scale_counts_only(budget, env_steps, seeds):

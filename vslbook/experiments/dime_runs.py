@@ -207,7 +207,7 @@ def chapter5_run_sets(
       steps at ``full`` (as published), every 6k at ``reduced`` (120k scaled), once at
       ``smoke``; network ``dmc``.
     * ``"ablations"``: :data:`ABLATIONS` on Pendulum-v1, ``budget.seeds`` seeds, 100k steps
-      at ``full`` / 8k at ``reduced`` / 5050 at ``smoke`` (Table C.2's 5000 exploration
+      at ``full`` / 15k at ``reduced`` / 5050 at ``smoke`` (Table C.2's 5000 exploration
       steps included), value range [-1600, 100]; network ``small``.
     * ``"pointmass"``: Fig. 5.7, DIME with a target network and each fixed α of
       :data:`POINT_MASS_ALPHAS`, one seed (the figure shows one agent), 100k / 10k / 5050
@@ -217,7 +217,7 @@ def chapter5_run_sets(
     (:data:`vslbook.srl.dime_config.NAMED_CONFIGS`); only counts depend on the budget.
     """
     b = get_budget(budget)
-    ablation_steps = b.pick(smoke=5_050, reduced=8_000, full=100_000)
+    ablation_steps = b.pick(smoke=5_050, reduced=15_000, full=100_000)
     pm_steps = b.pick(smoke=5_050, reduced=10_000, full=100_000)
     return {
         "cheetah": RunSet(
