@@ -1396,7 +1396,8 @@ annotate(fig, fs_pm)  # where the runs came from, under the figure
 save_figure(fig, f"fig5-7-pointmass-{budget.name}")
 plt.show()
 display(pd.DataFrame(summary).T.rename_axis("rollouts ending at"))
-n_goals = {label: sum(v > 0 for k, v in row.items() if k != "no goal") for label, row in summary.items()}
+n_goals = {label: int(sum(v > 0 for k, v in row.items() if k != "no goal"))
+           for label, row in summary.items()}
 more = list(n_goals.values()) == sorted(n_goals.values()) and len(set(n_goals.values())) > 1
 print(fs_pm.verdict(f"thesis: the larger α, the more goals reached (Fig. 5.7a-f); ours: {n_goals} "
                     f"({'as in the thesis' if more else 'NOT as in the thesis'})"))

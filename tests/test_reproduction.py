@@ -62,6 +62,18 @@ def test_claims_met_not_met_pending_and_smoke(beer_pong, tmp_path):
     assert verdicts("fig3-2", mixed, "test_success", reps=200)["seeds"][0] == {"SVSL": 4}
 
 
+def test_above_needs_the_iqm_above_the_others_ci(beer_pong, tmp_path):
+    # HiREPS 0.7 and 0.95: IQM (two runs: their mean) 0.825; bootstrap means of two draws
+    # are 0.7, 0.825 or 0.95 (a quarter, half, quarter), so the CI's upper end is 0.95.
+    # SVSL's IQM 0.875 is above HiREPS's IQM but inside its CI: not "above"
+    spread = [_run(tmp_path, f"hireps-wide-{i}", BP, [v]) for i, v in enumerate((0.7, 0.95))]
+    fs = FigureSet("fig3-2", "full", {"SVSL": beer_pong.runs["SVSL"], "HiREPS": spread})
+    scores = final_scores(fs.runs, "test_success", reps=200).set_index("method")
+    assert scores.loc["HiREPS", "iqm"] < scores.loc["SVSL", "iqm"] < 0.95
+    assert scores.loc["HiREPS", "ci_high"] == pytest.approx(0.95)
+    assert list(verdicts("fig3-2", fs, "test_success", reps=200)["status"]) == ["met", "not met"]
+
+
 def test_text_puts_the_thesis_numbers_beside_ours(beer_pong):
     text = reproduction_text("fig3-2", beer_pong, "test_success", reps=200)
     assert "SVSL: 0.875 [" in text and "4 seed(s); the thesis's: 0.92" in text

@@ -50,7 +50,7 @@ class Claim:
     Attributes:
         text: the claim in words, with where the thesis makes it.
         kind: ``at_least`` (``method``'s IQM ≥ ``value``), ``above`` (``method``'s IQM above
-            ``other``'s), ``within_or_above`` (``method``'s IQM at least ``other``'s CI's
+            the upper end of ``other``'s CI: clearly above, not within its spread), ``within_or_above`` (``method``'s IQM at least ``other``'s CI's
             lower end) or ``within_or_above_published`` (``method``'s IQM at least the lower
             end of the published curve's CI at the step ``method``'s runs end).
         method, other, value: as ``kind`` uses them.
@@ -187,7 +187,7 @@ def _check(claim: Claim, scores: pd.DataFrame, published: dict[str, float] | Non
     if claim.kind == "at_least":
         ok = mine >= claim.value
     elif claim.kind == "above":
-        ok = mine > row.loc[claim.other, "iqm"]
+        ok = mine > row.loc[claim.other, "ci_high"]
     elif claim.kind == "within_or_above":
         ok = mine >= row.loc[claim.other, "ci_low"]
     else:  # within_or_above_published (Claim checks the kind)
