@@ -50,9 +50,10 @@ class Claim:
     Attributes:
         text: the claim in words, with where the thesis makes it.
         kind: ``at_least`` (``method``'s IQM ≥ ``value``), ``above`` (``method``'s IQM above
-            the upper end of ``other``'s CI: clearly above, not within its spread), ``within_or_above`` (``method``'s IQM at least ``other``'s CI's
-            lower end) or ``within_or_above_published`` (``method``'s IQM at least the lower
-            end of the published curve's CI at the step ``method``'s runs end).
+            the upper end of ``other``'s CI: clearly above, not within its spread),
+            ``within_or_above`` (``method``'s IQM at least ``other``'s CI's lower end) or
+            ``within_or_above_published`` (``method``'s IQM at least the lower end of the
+            published curve's CI at the step ``method``'s runs end).
         method, other, value: as ``kind`` uses them.
         published: the task id of the published curve (:func:`vslbook.data.paper_curves`)
             of a ``within_or_above_published`` claim.
