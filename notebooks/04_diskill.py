@@ -1069,7 +1069,13 @@ print(f"active experts per goal: mean {active.mean():.2f}, at least two at "
       f"{(active >= 2).mean():.0%} of the goals")  # fmt: skip
 several = len(owners) >= 2 and (active >= 2).mean() > 0.5
 print("thesis: experts specialise on different parts of the disk, two or more active in most "
-      "of it — ours: " + set_5lr.verdict("as in the thesis" if several else "NOT as in the thesis"))
+      "of it — ours: " + set_5lr.verdict("as in the thesis" if several else "NOT as in the thesis")
+      + f" ({model.config.n_experts} experts; the thesis's model had 50, and fewer experts "
+      "leave fewer to overlap)")  # fmt: skip
+right, left = active[grid[:, 0] > 0].mean(), active[grid[:, 0] < 0].mean()
+print(f"active experts per goal: {right:.2f} on the start posture's side (x > 0), {left:.2f} "
+      "on the far side (x < 0); thesis: more near the start posture, fewer in the left half "
+      "— ours: " + set_5lr.verdict("as in the thesis" if right > left else "NOT as in the thesis"))
 for goal in goals:
     rs = [r for r in RF.reaches(model, goal) if r["gating"] >= 0.05]
     print(f"goal {goal}: " + ", ".join(f"expert {r['expert']} (π(o|c) {r['gating']:.2f}, "
