@@ -1027,6 +1027,7 @@ from pathlib import Path
 
 from vslbook.experiments import diskill_reacher as RF
 from vslbook.experiments import diskill_runs as DR
+from vslbook.experiments import diskill_scores as DS
 from vslbook.experiments.figure_sources import figure_set
 from vslbook.experiments.reproduction import reproduction_text
 from vslbook.experiments.svsl_mixtures import draw_learning_curves
@@ -1119,9 +1120,9 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
     runs = sets[figure].runs
     y = DR.METRIC[figure]
     fig_runs[figure] = runs
-    finals[figure] = DR.final_scores(figure, runs, y, reps=budget.bootstrap_reps)
+    finals[figure] = DS.final_scores(figure, runs, y, reps=budget.bootstrap_reps)
     if y != "test_return":  # the return too: it moves long before the first success
-        returns[figure] = DR.final_scores(figure, runs, "test_return", reps=budget.bootstrap_reps)[0]
+        returns[figure] = DS.final_scores(figure, runs, "test_return", reps=budget.bootstrap_reps)[0]
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
                          ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
     c = DR.counts(task, "diskill", sets[figure].budget)
@@ -1221,7 +1222,7 @@ fig.tight_layout()
 annotate(fig, tt_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
-scores, verdicts = DR.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
+scores, verdicts = DS.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
 print("final test success: " + "; ".join(score_line(r) for r in scores.itertuples()))
 for v in verdicts.itertuples():
     print(f"    thesis: {v.ahead} above {v.behind} — ours: "

@@ -15,6 +15,7 @@ import pytest
 from vslbook.erl.diskill_config import diskill_config
 from vslbook.experiments import diskill_reacher as R
 from vslbook.experiments import diskill_runs as D
+from vslbook.experiments import diskill_scores as DS
 
 
 def test_counts_scale_only_counts():
@@ -67,7 +68,7 @@ def test_final_scores_and_the_thesis_pairs(reacher_runs):
                 [line for line in (paths[0] / "metrics.jsonl").read_text().splitlines()
                  if "test_return" in line][-1])["test_return"]
             for m, paths in reacher_runs.items()}  # fmt: skip
-    scores, verdicts = D.final_scores("4.3c", reacher_runs, reps=50)
+    scores, verdicts = DS.final_scores("4.3c", reacher_runs, reps=50)
     assert list(scores["runs"]) == [1, 1, 1]  # one seed each: the IQM is that run's value
     # the median of each run's logged iteration times, read here from the file
     times = {m: np.median([json.loads(line)["iteration_seconds"]
@@ -82,14 +83,14 @@ def test_final_scores_and_the_thesis_pairs(reacher_runs):
         ("Di-SkilL", "BBRL"), ("Di-SkilL", "LinDi-SkilL")]  # fmt: skip
     assert list(verdicts["as_in_thesis"]) == [last["diskill"] > last["bbrl"],
                                               last["diskill"] > last["lindiskill"]]  # fmt: skip
-    # equal IQMs (here the same runs under two names) are a tie, not a verdict either way
-    _, tied = D.final_scores("4.3c", {"diskill": reacher_runs["bbrl"],
+    # equal IQMs (here the same runs under two names) are no ranking, not a verdict either way
+    _, tied = DS.final_scores("4.3c", {"diskill": reacher_runs["bbrl"],
                                       "bbrl": reacher_runs["bbrl"]}, reps=50)  # fmt: skip
     assert list(tied["as_in_thesis"]) == [None]
     with pytest.raises(ValueError, match="unknown figure '4.9'"):
-        D.final_scores("4.9", reacher_runs)
+        DS.final_scores("4.9", reacher_runs)
     with pytest.raises(ValueError, match="unknown method"):
-        D.final_scores("4.3c", {"sac": reacher_runs["bbrl"]})
+        DS.final_scores("4.3c", {"sac": reacher_runs["bbrl"]})
 
 
 def test_fig_4_2_analysis(reacher_runs):

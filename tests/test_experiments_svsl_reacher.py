@@ -247,6 +247,19 @@ def test_final_returns_take_each_runs_last_evaluation_and_compare_with_the_thesi
     flipped = curves.assign(method=curves["method"].map({"PPO": "SVSL", "SVSL": "PPO"}))
     verdict = sr.final_returns(flipped, reps=200).set_index(["reward", "method"])
     assert not verdict.loc[("3.8", "PPO"), "as_in_thesis"]
+    # SVSL at -4, -23, -25, -46: IQM -24, above PPO's -25 (the old point rule put SVSL
+    # ahead), yet inside PPO's CI, whose upper end is at least -20 (a bootstrap draw of
+    # seeds 0, 0, 1, 1 has IQM -15), while PPO's -25 is inside SVSL's: no method ahead
+    spread = {0: -4.0, 1: -23.0, 2: -25.0, 3: -46.0}
+    is_svsl = (curves["method"] == "SVSL") & (curves["episodes"] == 30.0)  # 3.8's last rows
+    close = curves.copy()
+    close.loc[is_svsl, "return"] = close.loc[is_svsl, "seed"].map(spread)
+    tied = sr.final_returns(close, reps=200).set_index(["reward", "method"])
+    assert tied.loc[("3.8", "SVSL"), "iqm"] == pytest.approx(-24.0)
+    assert tied.loc[("3.8", "PPO"), "ci_high"] >= -20.0
+    assert tied.loc[("3.8", "SVSL"), "ci_high"] > -25.0
+    assert tied.loc[("3.8", "SVSL"), "ahead"] is None
+    assert tied.loc[("3.8", "SVSL"), "as_in_thesis"] is None
     with pytest.raises(ValueError, match="lacks column"):
         sr.final_returns(curves.drop(columns="seed"))
 

@@ -74,6 +74,21 @@ def test_above_needs_the_iqm_above_the_others_ci(beer_pong, tmp_path):
     assert list(verdicts("fig3-2", fs, "test_success", reps=200)["status"]) == ["met", "not met"]
 
 
+def test_ranked_needs_an_iqm_outside_the_others_ci():
+    import pandas as pd
+
+    from vslbook.experiments.reproduction import ranked
+
+    scores = pd.DataFrame({"method": ["A", "B", "C"], "iqm": [1.0, 0.8, 1.2],
+                           "ci_low": [0.5, 0.7, 0.6], "ci_high": [1.5, 0.9, 1.6]})  # fmt: skip
+    assert ranked(scores, "A", "B") is True  # 1.0 above B's 0.9
+    assert ranked(scores, "B", "A") is False  # A's 1.0 above B's upper end 0.9
+    assert ranked(scores, "A", "C") is None  # 1.0 < 1.6 and 1.2 < 1.5: inside each other's CI
+    assert ranked(scores, "C", "B") is True
+    with pytest.raises(ValueError, match=r"no final scores for \['D'\]"):
+        ranked(scores, "A", "D")
+
+
 def test_text_puts_the_thesis_numbers_beside_ours(beer_pong):
     text = reproduction_text("fig3-2", beer_pong, "test_success", reps=200)
     assert "SVSL: 0.875 [" in text and "4 seed(s); the thesis's: 0.92" in text

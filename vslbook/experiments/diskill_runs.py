@@ -15,7 +15,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
 from vslbook.budget import Budget, get_budget
@@ -25,7 +24,7 @@ from vslbook.experiments.ch4_algorithms import DISKILL_ENVS
 __all__ = [
     "FIGURES", "LABELS", "METRIC", "METRIC_LABELS", "PPO_TASKS", "REDUCED", "THESIS_AHEAD",
     "THESIS_OUTCOME",
-    "counts", "curves", "env_id", "figure_runs", "final_scores", "load_model", "ppo_steps",
+    "counts", "curves", "env_id", "figure_runs", "load_model", "ppo_steps",
     "run_set",
 ]  # fmt: skip
 
@@ -245,45 +244,6 @@ def curves(
 
     labelled = {LABELS[m]: v for m, v in runs.items()}
     return learning_curves(labelled, y, reps=reps, methods=tuple(LABELS.values()))
-
-
-def final_scores(
-    figure: str, runs: dict[str, list[Path]], y: str = "test_return", *, reps: int | None = None
-) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """Each run's last evaluation of ``y``, aggregated per method, and the thesis's pairs.
-
-    Returns (scores, verdicts): scores has one row per method (label, runs, iqm, ci_low,
-    ci_high: IQM with a 95 % stratified-bootstrap CI over seeds; s_per_iteration: the
-    median wall time of an iteration over its runs, NaN for PPO); verdicts one row per pair
-    of :data:`THESIS_AHEAD` whose two methods both ran (ahead, behind, as_in_thesis: the
-    first's IQM above the second's; None where the two are equal, e.g. both at 0 success).
-    Runs of different lengths (PPO on 5LR at ``reduced``) are compared at their own last
-    evaluation.
-    """
-    from vslbook.experiments.reproduction import final_scores as finals
-    from vslbook.results import RunDir
-
-    if figure not in THESIS_AHEAD:
-        raise ValueError(f"unknown figure {figure!r}; expected one of {sorted(THESIS_AHEAD)}")
-    unknown = sorted(set(runs) - set(LABELS))
-    if unknown:
-        raise ValueError(f"unknown method(s) {unknown}; expected some of {sorted(LABELS)}")
-    scores = finals(runs, y, reps=reps)  # method, runs, iqm, ci_low, ci_high
-    seconds = {}
-    for method, paths in runs.items():
-        times = [r["iteration_seconds"] for path in paths for r in RunDir.open(path).metrics()
-                 if "iteration_seconds" in r]  # fmt: skip
-        seconds[method] = float(np.median(times)) if times else float("nan")
-    scores.insert(1, "label", scores["method"].map(LABELS))
-    scores["s_per_iteration"] = scores["method"].map(seconds)
-    point = scores.set_index("method")["iqm"]
-    verdicts = pd.DataFrame(
-        [{"ahead": LABELS[a], "behind": LABELS[b],
-          "as_in_thesis": None if point[a] == point[b] else bool(point[a] > point[b])}
-         for a, b in THESIS_AHEAD[figure] if a in point.index and b in point.index],
-        columns=["ahead", "behind", "as_in_thesis"],
-    )  # fmt: skip
-    return scores, verdicts
 
 
 def load_model(path: str | Path) -> Any:

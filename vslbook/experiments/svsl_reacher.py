@@ -254,11 +254,14 @@ THESIS_AHEAD = {"3.8": "PPO", "3.9": "SVSL", "3.10": "SVSL"}
 
 def final_returns(curves: pd.DataFrame, reps: int | None = None) -> pd.DataFrame:
     """Each run's last evaluation, aggregated per (reward, method): IQM with a 95 %
-    stratified-bootstrap CI over the seeds, and whether the method ahead in IQM is the one
-    the thesis reports ahead (``THESIS_AHEAD``). Rewards without both methods get no
-    verdict. Columns: reward, method, runs, iqm, ci_low, ci_high, ahead, as_in_thesis.
+    stratified-bootstrap CI over the seeds, the method ahead (its IQM above the upper end of
+    the other's CI, :func:`vslbook.experiments.reproduction.ranked`; None where neither is)
+    and whether it is the one the thesis reports ahead (``THESIS_AHEAD``). Rewards without
+    both methods, or without a method ahead, get no verdict (None). Columns: reward, method,
+    runs, iqm, ci_low, ci_high, ahead, as_in_thesis.
     """
     from vslbook import stats
+    from vslbook.experiments.reproduction import ranked
 
     missing = {"method", "reward", "seed", "episodes", "return"} - set(curves.columns)
     if missing:
@@ -272,7 +275,13 @@ def final_returns(curves: pd.DataFrame, reps: int | None = None) -> pd.DataFrame
         if not table:
             continue
         point, ci = stats.interval_estimates(table, reps=reps)
-        ahead = max(point, key=lambda m: point[m][0]) if len(table) == len(METHODS) else None
+        ahead = None
+        if len(table) == len(METHODS):
+            scores = pd.DataFrame({"method": list(table),
+                                   "iqm": [float(point[m][0]) for m in table],
+                                   "ci_high": [float(ci[m][1, 0]) for m in table]})  # fmt: skip
+            first, second = METHODS
+            ahead = {True: first, False: second, None: None}[ranked(scores, first, second)]
         for m in table:
             rows.append({
                 "reward": reward, "method": m, "runs": len(table[m]),
