@@ -12,7 +12,7 @@ def row(**kw):
 def test_verdict_words():
     assert verdict(True) == "as in the thesis"
     assert verdict(False) == "NOT as in the thesis"
-    assert verdict(None) == "tied (equal IQMs)"
+    assert verdict(None) == "no ranking (each IQM inside the other's 95 % CI)"
 
 
 def test_score_line_with_and_without_time():
