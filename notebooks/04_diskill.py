@@ -1125,10 +1125,12 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
         returns[figure] = DS.final_scores(figure, runs, "test_return", reps=budget.bootstrap_reps)[0]
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
                          ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
+    sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: dashed, "(probe, …)"
     c = DR.counts(task, "diskill", sets[figure].budget)
     probe = " (probes)" if sets[figure].probes else ""
     ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}, {c['iterations']} "
-                 f"iterations, {count_phrase(len(runs['diskill']), 'seed')}", fontsize=10)  # fmt: skip
+                 f"iterations, {count_phrase(sets[figure].finished('diskill'), 'seed')}",
+                 fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
 annotate(fig, *sets.values())  # where the runs came from, under the figure
@@ -1146,14 +1148,15 @@ plt.show()
 from vslbook.experiments.diskill_scores import score_line, verdict
 
 for figure, (scores, verdicts) in finals.items():
+    probes = sets[figure].probe_progress()
     print(f"Fig. {figure} ({DR.METRIC[figure]}): " + "; ".join(
-        score_line(r) for r in scores.itertuples()))
+        score_line(r, probes=probes) for r in scores.itertuples()))
     for v in verdicts.itertuples():
         print(f"    thesis: {v.ahead} above {v.behind} — ours: "
-              + sets[figure].verdict(verdict(v.as_in_thesis)))
+              + sets[figure].verdict(verdict(v.as_in_thesis), v.methods))
     if figure in returns:
         print("    final test return: " + "; ".join(
-            score_line(r, with_time=False) for r in returns[figure].itertuples()))
+            score_line(r, with_time=False, probes=probes) for r in returns[figure].itertuples()))
 # the reproduction targets of Figs. 4.3c and 4.4a (vslbook.experiments.reproduction)
 for figure in ("4.3c", "4.4a"):
     print(reproduction_text("fig" + figure.replace(".", "-"), sets[figure], DR.METRIC[figure],
@@ -1214,19 +1217,21 @@ for ax, y in zip(axes, ("test_success", "test_return"), strict=True):
     draw_learning_curves(ax, DR.curves(runs_tt, y, reps=budget.bootstrap_reps),
                          ylabel=DR.METRIC_LABELS[y] + " (IQM)",
                          thesis=DR.THESIS_OUTCOME["4.3b"] if y == "test_success" else None)  # fmt: skip
+    tt_set.mark_probes(ax, DR.LABELS)
 c = DR.counts("table-tennis-4d", "diskill", tt_set.budget)
 fig.suptitle(f"Fig. 4.3b (ours, budget {tt_set.budget}: {c['iterations']} iterations, "
-             f"{count_phrase(len(runs_tt['diskill']), 'seed')}; thesis: 4500 iterations)",
+             f"{count_phrase(tt_set.finished('diskill'), 'seed')}; thesis: 4500 iterations)",
              fontsize=10)  # fmt: skip
 fig.tight_layout()
 annotate(fig, tt_set)  # where the runs came from, under the figure
 save_figure(fig, "fig-4-3b-ablation")
 plt.show()
 scores, verdicts = DS.final_scores("4.3b", runs_tt, "test_success", reps=budget.bootstrap_reps)
-print("final test success: " + "; ".join(score_line(r) for r in scores.itertuples()))
+print("final test success: " + "; ".join(score_line(r, probes=tt_set.probe_progress())
+                                         for r in scores.itertuples()))  # fmt: skip
 for v in verdicts.itertuples():
     print(f"    thesis: {v.ahead} above {v.behind} — ours: "
-          + tt_set.verdict(verdict(v.as_in_thesis)))
+          + tt_set.verdict(verdict(v.as_in_thesis), v.methods))
 print(reproduction_text("fig4-3b", tt_set, "test_success", reps=budget.bootstrap_reps))
 display(measurements("table_tennis_probe.csv"))  # the probe, with its provenance in data/
 
@@ -1293,10 +1298,11 @@ for ax, y, label in zip(axes, ("test_return", "test_max_height", "test_goal_dist
                         ("(a) return", "(b) max height [m]", "(c) goal distance [m]"), strict=True):  # fmt: skip
     draw_learning_curves(ax, DR.curves(runs_hj, y, reps=budget.bootstrap_reps),
                          ylabel=label + " (IQM)")  # fmt: skip
+    sets["4.4a"].mark_probes(ax, DR.LABELS)
     ax.set_title(f"Fig. B.3{label[:3]}")
 c = DR.counts("hopper-jump", "diskill", sets["4.4a"].budget)
 fig.suptitle(f"Fig. B.3 (ours, budget {sets['4.4a'].budget}: {c['iterations']} iterations, "
-             f"{count_phrase(len(runs_hj['diskill']), 'seed')}; thesis: 1400 iterations, "
+             f"{count_phrase(sets['4.4a'].finished('diskill'), 'seed')}; thesis: 1400 iterations, "
              "24 seeds)", fontsize=10)  # fmt: skip
 fig.tight_layout()
 annotate(fig, sets["4.4a"])  # where the runs came from, under the figure

@@ -19,3 +19,12 @@ def test_score_line_with_and_without_time():
     assert score_line(row()) == "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.)"
     assert score_line(row(), with_time=False) == "Di-SkilL 0.123 [0.1, 0.2]"
     assert score_line(row(s_per_iteration=float("nan"))) == "Di-SkilL 0.123 [0.1, 0.2]"
+
+
+def test_score_line_says_where_a_probe_had_got_to():
+    probes = {"diskill-v2": "900/4500 step"}
+    assert score_line(row(method="diskill-v2"), probes=probes) == (
+        "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.) (probe at 900/4500 step)")
+    plain = "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.)"
+    assert score_line(row(method="diskill"), probes=probes) == plain
+    assert score_line(row(), probes=probes) == plain  # a row with no method

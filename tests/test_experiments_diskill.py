@@ -83,6 +83,7 @@ def test_final_scores_and_the_thesis_pairs(reacher_runs):
         ("Di-SkilL", "BBRL"), ("Di-SkilL", "LinDi-SkilL")]  # fmt: skip
     assert list(verdicts["as_in_thesis"]) == [last["diskill"] > last["bbrl"],
                                               last["diskill"] > last["lindiskill"]]  # fmt: skip
+    assert list(verdicts["methods"]) == [("diskill", "bbrl"), ("diskill", "lindiskill")]
     # equal IQMs (here the same runs under two names) are no ranking, not a verdict either way
     _, tied = DS.final_scores("4.3c", {"diskill": reacher_runs["bbrl"],
                                       "bbrl": reacher_runs["bbrl"]}, reps=50)  # fmt: skip

@@ -16,7 +16,13 @@ import pytest
 
 from vslbook.data import register_file
 from vslbook.experiments.diskill_runs import load_model
-from vslbook.experiments.figure_sources import SMOKE_VERDICT, FigureSet, figure_set, source_mode
+from vslbook.experiments.figure_sources import (
+    PROBE_VERDICT,
+    SMOKE_VERDICT,
+    FigureSet,
+    figure_set,
+    source_mode,
+)
 from vslbook.experiments.record import record, recorded_dir
 from vslbook.experiments.recorded_runs import materialise, metric_rows
 from vslbook.experiments.run_plan import figure_runs
@@ -210,8 +216,6 @@ def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path,
     assert not RunDir(probe).done and fs.probes == {run.name: "1/2 step"}
     assert "probes, still training: diskill s0 at 1/2 step" in fs.caption()
     assert fs.verdict("x") == SMOKE_VERDICT  # smoke first; at full a probe-only set says so
-    from vslbook.experiments.figure_sources import PROBE_VERDICT
-
     assert replace(fs, budget="full").verdict("x") == PROBE_VERDICT
     (row,) = [r for r in result_rows([FIGURE]) if r["method"] == "diskill"]
     assert (row["seeds"], row["probes"], row["iqm"]) == (0, 1, None)  # counted, never scored
@@ -246,3 +250,49 @@ def test_a_panel_of_one_run_can_say_it_is_a_probe(tmp_path):
                    probes={"b": "900/4500 step"})  # fmt: skip
     assert fs.probe_note(tmp_path / "b") == ", probe at 900/4500 step"
     assert fs.probe_note(tmp_path / "a") == ""
+
+
+def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
+    runs = {"diskill": [tmp_path / "d0"], "bbrl": [tmp_path / "b0"],
+            "diskill-v2": [tmp_path / "v0", tmp_path / "v1"]}  # fmt: skip
+    for seed, name in enumerate(("v0", "v1")):  # the caption reads a probe's seed
+        (tmp_path / name).mkdir()
+        (tmp_path / name / RunDir.CONFIG).write_text(json.dumps({"seed": seed}))
+    fs = FigureSet("fig4-3b", "full", runs, seeds_full=dict.fromkeys(runs, 24),
+                   probes={"v0": "900/4500 step", "v1": "450/4500 step"})  # fmt: skip
+    assert [fs.finished(m) for m in ("diskill", "bbrl", "diskill-v2", "svsl")] == [1, 1, 0, 0]
+    assert fs.probe_progress() == {"diskill-v2": "900/4500 step, 450/4500 step"}
+    caption = fs.caption()
+    assert "seeds diskill 1 of 24, bbrl 1 of 24, diskill-v2 0 of 24 and 2 probes" in caption
+    assert "probes, still training: v0 s0 at 900/4500 step, v1 s1 at 450/4500 step" in caption
+    # a pair with a probe in it is not compared; a pair of finished runs is
+    assert fs.verdict("as in the thesis", ("diskill", "diskill-v2")) == PROBE_VERDICT
+    assert fs.verdict("as in the thesis", ("diskill", "bbrl")) == "as in the thesis"
+    assert fs.verdict("as in the thesis") == "as in the thesis"  # not every run a probe
+    one = replace(fs, probes={"v0": "900/4500 step"})
+    assert "diskill-v2 1 of 24 and 1 probe" in one.caption()
+
+
+def test_mark_probes_dashes_the_probe_curves_and_names_them_in_the_legend(tmp_path):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fs = FigureSet("fig4-3b", "full", {"diskill": [tmp_path / "d0"],
+                                       "diskill-v2": [tmp_path / "v0"]},
+                   probes={"v0": "900/4500 step"})  # fmt: skip
+    fig, ax = plt.subplots()
+    ax.plot([0, 1], [0, 1], label="Di-SkilL", linestyle="-")
+    ax.plot([0, 1], [1, 0], label="Di-SkilLV2", linestyle="-")
+    ax.legend(fontsize=8)
+    fs.mark_probes(ax, {"diskill": "Di-SkilL", "diskill-v2": "Di-SkilLV2"})
+    finished, probe = ax.get_lines()
+    assert (finished.get_linestyle(), finished.get_label()) == ("-", "Di-SkilL")
+    assert (probe.get_linestyle(), probe.get_label()) == ("--", "Di-SkilLV2 (probe, 900/4500 step)")
+    texts = [t.get_text() for t in ax.get_legend().get_texts()]
+    assert texts == ["Di-SkilL", "Di-SkilLV2 (probe, 900/4500 step)"]
+    assert ax.get_legend().get_texts()[0].get_fontsize() == 8
+    with pytest.raises(ValueError, match=r"no curve label .* method\(s\) \['diskill-v2'\]"):
+        fs.mark_probes(ax, {"diskill": "Di-SkilL"})
+    plt.close(fig)

@@ -55,9 +55,10 @@ def final_scores(
     scores["s_per_iteration"] = scores["method"].map(seconds)
     ran = set(scores["method"])
     verdicts = pd.DataFrame(
-        [{"ahead": LABELS[a], "behind": LABELS[b], "as_in_thesis": ranked(scores, a, b)}
+        [{"ahead": LABELS[a], "behind": LABELS[b], "as_in_thesis": ranked(scores, a, b),
+          "methods": (a, b)}
          for a, b in THESIS_AHEAD[figure] if a in ran and b in ran],
-        columns=["ahead", "behind", "as_in_thesis"],
+        columns=["ahead", "behind", "as_in_thesis", "methods"],
     )  # fmt: skip
     return scores, verdicts
 
@@ -70,12 +71,17 @@ def verdict(as_in_thesis: bool | None) -> str:
     return "as in the thesis" if as_in_thesis else "NOT as in the thesis"
 
 
-def score_line(r: Any, with_time: bool = True) -> str:
+def score_line(r: Any, with_time: bool = True, probes: dict[str, str] | None = None) -> str:
     """`label IQM [low, high] (s/it.)` for one row of a score table (attributes `label`,
-    `iqm`, `ci_low`, `ci_high`, `s_per_iteration`); the time is left out when unknown."""
+    `iqm`, `ci_low`, `ci_high`, `s_per_iteration`); the time is left out when unknown.
+    ``probes`` (method → progress, :meth:`FigureSet.probe_progress
+    <vslbook.experiments.figure_sources.FigureSet.probe_progress>`) marks a row whose
+    method's runs include a probe: its "final" score is where the probe had got to."""
     time = (
         ""
         if not with_time or math.isnan(r.s_per_iteration)
         else f" ({r.s_per_iteration:.2g} s/it.)"
     )
-    return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}"
+    method = getattr(r, "method", None)
+    probe = f" (probe at {probes[method]})" if probes and method in probes else ""
+    return f"{r.label} {r.iqm:.3g} [{r.ci_low:.3g}, {r.ci_high:.3g}]{time}{probe}"

@@ -120,18 +120,57 @@ class FigureSet:
     def _paths(self) -> dict[str, Path]:
         return {p.name: p for paths in self.runs.values() for p in paths}
 
+    def finished(self, method: str) -> int:
+        """How many of ``method``'s runs are finished seeds (its probes not counted)."""
+        return sum(p.name not in self.probes for p in self.runs.get(method, []))
+
+    def probe_progress(self) -> dict[str, str]:
+        """method → how far its probes had trained when recorded (``"900/4500 step"``,
+        several joined by ", "), for the methods that have a probe."""
+        out: dict[str, list[str]] = {}
+        for method, paths in self.runs.items():
+            for p in paths:
+                if p.name in self.probes:
+                    out.setdefault(method, []).append(self.probes[p.name])
+        return {m: ", ".join(dict.fromkeys(v)) for m, v in out.items()}
+
+    def mark_probes(self, ax: Any, labels: dict[str, str]) -> None:
+        """Draw the curves of ``ax`` that come from probes dashed, with "(probe, 900/4500
+        step)" in their legend entry; ``labels`` maps a method to its curve's label.
+
+        Raises:
+            ValueError: a method with probes has no label in ``labels``.
+        """
+        progress = self.probe_progress()
+        missing = sorted(set(progress) - set(labels))
+        if missing:
+            raise ValueError(f"no curve label for the probe method(s) {missing}; expected "
+                             f"them among the keys of labels {sorted(labels)}")  # fmt: skip
+        named = {labels[m]: p for m, p in progress.items()}
+        for line in ax.get_lines():
+            if line.get_label() in named:
+                line.set_linestyle("--")
+                line.set_label(f"{line.get_label()} (probe, {named[line.get_label()]})")
+        old = ax.get_legend()
+        if named and old is not None:
+            ax.legend(fontsize=old.get_texts()[0].get_fontsize() if old.get_texts() else None)
+
     def probe_note(self, path: str | Path) -> str:
         """``", probe at 300/4500 step"`` for a run still training when recorded (to put in
         the title of a panel drawn from that one run), else ``""``."""
         name = Path(path).name
         return f", probe at {self.probes[name]}" if name in self.probes else ""
 
-    def verdict(self, text: str) -> str:
+    def verdict(self, text: str, methods: tuple[str, ...] = ()) -> str:
         """``text`` (a comparison with the thesis), or :data:`SMOKE_VERDICT` at smoke, or
-        :data:`PROBE_VERDICT` where every run is a probe."""
+        :data:`PROBE_VERDICT` where every run is a probe or, when ``methods`` names the
+        methods compared, where one of them has a probe (a run still training is not
+        compared with a finished one)."""
         if self.smoke:
             return SMOKE_VERDICT
         if self.probes and len(self.probes) == sum(map(len, self.runs.values())):
+            return PROBE_VERDICT
+        if set(methods) & set(self.probe_progress()):
             return PROBE_VERDICT
         return text
 
@@ -149,8 +188,10 @@ class FigureSet:
             dates = sorted({str(i["date"] or "?")[:10] for i in self.recorded.values()})
             span = dates[0] if len(dates) == 1 else f"{dates[0]} to {dates[-1]}"
             origin += f" (data/results/{self.figure}/{self.budget}: code {', '.join(shas)}, {span})"
-        seeds = ", ".join(f"{m} {len(p)} of {self.seeds_full.get(m, '?')}"
-                          for m, p in self.runs.items())  # fmt: skip
+        seeds = ", ".join(
+            f"{m} {self.finished(m)} of {self.seeds_full.get(m, '?')}"
+            + (f" and {k} probe{'s' * (k > 1)}" if (k := len(p) - self.finished(m)) else "")
+            for m, p in self.runs.items())  # fmt: skip
         line = (f"Runs of {self.figure}: {origin} at the {self.budget} budget; seeds {seeds} "
                 "(of the thesis's, the full budget's)")  # fmt: skip
         notes = []
