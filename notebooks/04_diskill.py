@@ -1125,7 +1125,7 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
         returns[figure] = DS.final_scores(figure, runs, "test_return", reps=budget.bootstrap_reps)[0]
     draw_learning_curves(ax, DR.curves(runs, y, reps=budget.bootstrap_reps),
                          ylabel=DR.METRIC_LABELS[y] + " (IQM)", thesis=DR.THESIS_OUTCOME[figure])  # fmt: skip
-    sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: dashed, "(probe, …)"
+    sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: faded, "(probe, …)"
     c = DR.counts(task, "diskill", sets[figure].budget)
     probe = " (probes)" if sets[figure].probes else ""
     ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}, {c['iterations']} "

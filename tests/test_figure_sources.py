@@ -273,7 +273,7 @@ def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
     assert "diskill-v2 1 of 24 and 1 probe" in one.caption()
 
 
-def test_mark_probes_dashes_the_probe_curves_and_names_them_in_the_legend(tmp_path):
+def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_path):
     import matplotlib
 
     matplotlib.use("Agg")
@@ -288,8 +288,9 @@ def test_mark_probes_dashes_the_probe_curves_and_names_them_in_the_legend(tmp_pa
     ax.legend(fontsize=8)
     fs.mark_probes(ax, {"diskill": "Di-SkilL", "diskill-v2": "Di-SkilLV2"})
     finished, probe = ax.get_lines()
-    assert (finished.get_linestyle(), finished.get_label()) == ("-", "Di-SkilL")
-    assert (probe.get_linestyle(), probe.get_label()) == ("--", "Di-SkilLV2 (probe, 900/4500 step)")
+    assert (finished.get_alpha(), finished.get_label()) == (None, "Di-SkilL")
+    assert (probe.get_alpha(), probe.get_label()) == (0.45, "Di-SkilLV2 (probe, 900/4500 step)")
+    assert probe.get_linestyle() == "-"  # the method's own style stays
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
     assert texts == ["Di-SkilL", "Di-SkilLV2 (probe, 900/4500 step)"]
     assert ax.get_legend().get_texts()[0].get_fontsize() == 8

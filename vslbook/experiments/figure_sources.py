@@ -49,6 +49,8 @@ SMOKE_VERDICT = "smoke: code path only (a few iterations or steps; not compared 
 #: what a figure says instead of a verdict when every run it draws is a probe
 PROBE_VERDICT = "probes: runs still training, not compared with the thesis"
 _LARGEST_FIRST = ("full", "reduced", "smoke")
+#: the opacity of a probe's curve (:meth:`FigureSet.mark_probes`)
+PROBE_ALPHA = 0.45
 
 
 def source_mode() -> str:
@@ -135,8 +137,9 @@ class FigureSet:
         return {m: ", ".join(dict.fromkeys(v)) for m, v in out.items()}
 
     def mark_probes(self, ax: Any, labels: dict[str, str]) -> None:
-        """Draw the curves of ``ax`` that come from probes dashed, with "(probe, 900/4500
-        step)" in their legend entry; ``labels`` maps a method to its curve's label.
+        """Draw the curves of ``ax`` that come from probes faded (their method's line style
+        is kept: every style is some method's), with "(probe, 900/4500 step)" in their legend
+        entry; ``labels`` maps a method to its curve's label.
 
         Raises:
             ValueError: a method with probes has no label in ``labels``.
@@ -149,7 +152,7 @@ class FigureSet:
         named = {labels[m]: p for m, p in progress.items()}
         for line in ax.get_lines():
             if line.get_label() in named:
-                line.set_linestyle("--")
+                line.set_alpha(PROBE_ALPHA)
                 line.set_label(f"{line.get_label()} (probe, {named[line.get_label()]})")
         old = ax.get_legend()
         if named and old is not None:
