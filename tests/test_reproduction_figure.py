@@ -85,3 +85,21 @@ def test_a_method_still_training_says_how_far(tmp_path):
                       "HiREPS (ours): no finished run"]  # fmt: skip
     assert _points(ax) == {}  # a probe is drawn by the chapter's figure, not scored here
     assert "2 pending" in ax.get_title()
+
+
+def test_two_methods_on_par_are_not_drawn_far_apart(tmp_path):
+    # hopper jump: 20.78 against 20.70, 0.4 % apart; the axis spans 10 % of 20.78 or more
+    di = [_run(tmp_path, "d0", "test_return", [0.0, 20.78], env="hj")]
+    bb = [_run(tmp_path, "b0", "test_return", [0.0, 20.70], env="hj")]
+    hopper = FigureSet("fig4-4a", "full", {"diskill": di, "bbrl": bb})
+    (ax,) = results_figure({"fig4-4a": hopper}, reps=50).axes
+    lo, hi = ax.get_xlim()
+    assert hi - lo == pytest.approx(0.1 * 20.78, rel=0.01) and lo < 20.70 and hi > 20.78
+    assert (lo + hi) / 2 == pytest.approx(20.74, abs=0.01)  # widened about the middle
+    # a panel whose values already spread keeps matplotlib's limits
+    di5 = [_run(tmp_path, "d5", "test_return", [0.0, -0.72], env="r5")]
+    bb5 = [_run(tmp_path, "b5", "test_return", [0.0, -2.35], env="r5")]
+    five = FigureSet("fig4-3c", "full", {"diskill": di5, "bbrl": bb5})
+    (reacher,) = results_figure({"fig4-3c": five}, reps=50).axes
+    lo, hi = reacher.get_xlim()
+    assert -2.5 < lo < -2.35 and -0.72 < hi < -0.6

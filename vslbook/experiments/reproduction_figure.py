@@ -74,6 +74,21 @@ def _panels(sets: dict) -> list[tuple[str, str, list[Claim]]]:
     return panels
 
 
+#: the least span of a panel's value axis, as a fraction of the largest value on it
+MIN_RELATIVE_SPAN = 0.1
+
+
+def _at_least_span(ax) -> None:
+    """Widen the value axis of ``ax`` about its middle to :data:`MIN_RELATIVE_SPAN` of its
+    largest absolute value, so that a difference of a fraction of a percent (two methods on
+    par, as on hopper jump) does not fill the panel and read as a large one."""
+    lo, hi = ax.get_xlim()
+    scale = max(abs(lo), abs(hi))
+    if scale > 0 and hi - lo < MIN_RELATIVE_SPAN * scale:
+        mid = (lo + hi) / 2
+        ax.set_xlim(mid - MIN_RELATIVE_SPAN * scale / 2, mid + MIN_RELATIVE_SPAN * scale / 2)
+
+
 def _draw_panel(ax, figure: str, fs, metric: str, claims: list[Claim], reps) -> None:
     runs = claim_runs(claims[0], fs)  # the claims of a panel share their task
     rows: list[tuple[str, float, float, float, str, str]] = []  # label, iqm, lo, hi, colour, kind
@@ -121,6 +136,7 @@ def _draw_panel(ax, figure: str, fs, metric: str, claims: list[Claim], reps) -> 
     for value, methods in thresholds.items():
         ax.axvline(value, color="0.35", ls="--", lw=1.2,
                    label=f"claim: {', '.join(methods)} ≥ {value:g}")
+    _at_least_span(ax)
     ax.set_yticks(range(len(rows)), [r[0] for r in rows], fontsize=8)
     ax.set_ylim(-0.7, len(rows) - 0.3)
     ax.invert_yaxis()
