@@ -43,6 +43,7 @@ def test_the_command_line_trains_the_run_the_figure_draws():
 
 def test_plan_reads_the_state_of_each_run(tmp_path, monkeypatch):
     monkeypatch.setenv("VSLBOOK_WORKERS", "1")
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))  # no recorded times
     runs = figure_runs("fig4-4a", "smoke")
     first = runs[0]
     first.train(tmp_path)
@@ -66,11 +67,12 @@ def test_plan_reads_the_state_of_each_run(tmp_path, monkeypatch):
         f"done     {first.name} (code changed: replayed when resumed or recorded)")
 
 
-def test_plan_estimates_from_the_recent_mean_cost(tmp_path):
+def test_plan_estimates_from_the_recent_mean_cost(tmp_path, monkeypatch):
     """A partial run's hours left: its remaining iterations times the mean of its last
     quarter's logged iteration seconds (rare costly iterations count; costs that grow, as
     SVSL's with each expert added, are taken where they are now); a missing run of the same
     method: the mean over every logged iteration of its method's runs."""
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))  # no recorded times
     runs = figure_runs("fig4-4a", "reduced")  # three seeds of each method
     first, second = runs[0], next(r for r in runs[1:] if r.algo == runs[0].algo)
     run = tmp_path / first.name
@@ -86,7 +88,9 @@ def test_plan_estimates_from_the_recent_mean_cost(tmp_path):
     assert rows[second.name].seconds_per_unit == pytest.approx(sum(times) / len(times))
 
 
-def test_plan_keeps_only_the_runs_asked_for(capsys, tmp_path):
+def test_plan_keeps_only_the_runs_asked_for(capsys, tmp_path, monkeypatch):
+    # no recorded results to time the runs with (data/results has Fig. 4.4a at full)
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
     runs = figure_runs("fig4-4a", "reduced")
     wanted = [r.name for r in runs if r.seed in (0, 2) and r.method == "bbrl"]
     assert len(wanted) == 2
