@@ -88,7 +88,7 @@ opening = {"fig3-2": figure_set("fig3-2", budget, root, envs=("vslbook/BeerPong-
                                 progress=True)}
 fig = results_figure(opening, reps=budget.bootstrap_reps)
 annotate(fig, *opening.values())  # where the runs came from, under the figure
-save_figure(fig, f"ch3-results-{budget.name}")
+save_figure(fig, "ch3-results")
 plt.show()
 display(show_claims(claims_overview(list(opening), sets=opening,
                                   reps=budget.bootstrap_reps)))

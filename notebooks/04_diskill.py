@@ -99,7 +99,7 @@ root = Path(vslbook.__file__).resolve().parents[1] / "runs"  # run directories, 
 opening = {f: figure_set(f, budget, root, progress=True) for f in ("fig4-3b", "fig4-3c", "fig4-4a")}
 fig = results_figure(opening, reps=budget.bootstrap_reps)
 annotate(fig, *opening.values())  # where the runs came from, under the figure
-save_figure(fig, f"ch4-results-{budget.name}")
+save_figure(fig, "ch4-results")
 plt.show()
 display(show_claims(claims_overview(list(opening), sets=opening,
                                   reps=budget.bootstrap_reps)))

@@ -95,7 +95,7 @@ from vslbook.experiments.reproduction_figure import results_figure
 opening = {f: chapter5_figure(f, RUNS, TABLES)[0] for f in ("fig5-3-cheetah", "fig5-ablations")}
 fig = results_figure(opening, reps=budget.bootstrap_reps)
 annotate(fig, *opening.values())  # where the runs came from, under the figure
-save_figure(fig, f"ch5-results-{budget.name}")
+save_figure(fig, "ch5-results")
 plt.show()
 display(show_claims(claims_overview(list(opening), sets=opening,
                                   reps=budget.bootstrap_reps)))

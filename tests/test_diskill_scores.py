@@ -22,9 +22,9 @@ def test_score_line_with_and_without_time():
 
 
 def test_score_line_says_where_a_probe_had_got_to():
-    probes = {"diskill-v2": "900/4500 step"}
+    probes = {"diskill-v2": "900/4500 iterations"}
     assert score_line(row(method="diskill-v2"), probes=probes) == (
-        "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.) (probe at 900/4500 step)")
+        "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.) (probe at 900/4500 iterations)")
     plain = "Di-SkilL 0.123 [0.1, 0.2] (1.2 s/it.)"
     assert score_line(row(method="diskill"), probes=probes) == plain
     assert score_line(row(), probes=probes) == plain  # a row with no method

@@ -209,12 +209,12 @@ def test_a_probe_is_recorded_up_to_its_checkpoint_and_drawn_as_a_probe(tmp_path,
     assert main(["record", FIGURE, "--budget", BUDGET, "--root", str(root)]) == 0
     assert "not recorded  partial  " + run.name in capsys.readouterr().out
     assert main(["record", FIGURE, "--budget", BUDGET, "--root", str(root), "--partial"]) == 0
-    assert f"recorded      {run.name}  (probe: 1/2 step)" in capsys.readouterr().out
+    assert f"recorded      {run.name}  (probe: 1/2 iterations)" in capsys.readouterr().out
     fs = figure_set(FIGURE, root=tmp_path / "empty", mode="best", methods=("diskill",))
     probe = fs.runs["diskill"][0]
     assert [r["step"] for r in RunDir(probe).metrics()] == [0, 1]  # up to the checkpoint
-    assert not RunDir(probe).done and fs.probes == {run.name: "1/2 step"}
-    assert "probes, still training: diskill s0 at 1/2 step" in fs.caption()
+    assert not RunDir(probe).done and fs.probes == {run.name: "1/2 iterations"}
+    assert "probes, still training: diskill s0 at 1/2 iterations" in fs.caption()
     assert fs.verdict("x") == SMOKE_VERDICT  # smoke first; at full a probe-only set says so
     assert replace(fs, budget="full").verdict("x") == PROBE_VERDICT
     (row,) = [r for r in result_rows([FIGURE]) if r["method"] == "diskill"]
@@ -247,8 +247,8 @@ def test_annotate_puts_the_caption_under_the_figure_in_red_when_stale(tmp_path):
 
 def test_a_panel_of_one_run_can_say_it_is_a_probe(tmp_path):
     fs = FigureSet(FIGURE, "full", {"diskill": [tmp_path / "a", tmp_path / "b"]},
-                   probes={"b": "900/4500 step"})  # fmt: skip
-    assert fs.probe_note(tmp_path / "b") == ", probe at 900/4500 step"
+                   probes={"b": "900/4500 iterations"})  # fmt: skip
+    assert fs.probe_note(tmp_path / "b") == ", probe at 900/4500 iterations"
     assert fs.probe_note(tmp_path / "a") == ""
 
 
@@ -259,17 +259,18 @@ def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
         (tmp_path / name).mkdir()
         (tmp_path / name / RunDir.CONFIG).write_text(json.dumps({"seed": seed}))
     fs = FigureSet("fig4-3b", "full", runs, seeds_full=dict.fromkeys(runs, 24),
-                   probes={"v0": "900/4500 step", "v1": "450/4500 step"})  # fmt: skip
+                   probes={"v0": "900/4500 iterations", "v1": "450/4500 iterations"})  # fmt: skip
     assert [fs.finished(m) for m in ("diskill", "bbrl", "diskill-v2", "svsl")] == [1, 1, 0, 0]
-    assert fs.probe_progress() == {"diskill-v2": "900/4500 step, 450/4500 step"}
+    assert fs.probe_progress() == {"diskill-v2": "900/4500 iterations, 450/4500 iterations"}
     caption = fs.caption()
     assert "seeds diskill 1 of 24, bbrl 1 of 24, diskill-v2 0 of 24 and 2 probes" in caption
-    assert "probes, still training: v0 s0 at 900/4500 step, v1 s1 at 450/4500 step" in caption
+    assert ("probes, still training: v0 s0 at 900/4500 iterations, v1 s1 at 450/4500 "
+            "iterations") in caption
     # a pair with a probe in it is not compared; a pair of finished runs is
     assert fs.verdict("as in the thesis", ("diskill", "diskill-v2")) == PROBE_VERDICT
     assert fs.verdict("as in the thesis", ("diskill", "bbrl")) == "as in the thesis"
     assert fs.verdict("as in the thesis") == "as in the thesis"  # not every run a probe
-    one = replace(fs, probes={"v0": "900/4500 step"})
+    one = replace(fs, probes={"v0": "900/4500 iterations"})
     assert "diskill-v2 1 of 24 and 1 probe" in one.caption()
 
 
@@ -281,7 +282,7 @@ def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_pat
 
     fs = FigureSet("fig4-3b", "full", {"diskill": [tmp_path / "d0"],
                                        "diskill-v2": [tmp_path / "v0"]},
-                   probes={"v0": "900/4500 step"})  # fmt: skip
+                   probes={"v0": "900/4500 iterations"})  # fmt: skip
     fig, ax = plt.subplots()
     ax.plot([0, 1], [0, 1], label="Di-SkilL", linestyle="-")
     ax.plot([0, 1], [1, 0], label="Di-SkilLV2", linestyle="-")
@@ -289,10 +290,11 @@ def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_pat
     fs.mark_probes(ax, {"diskill": "Di-SkilL", "diskill-v2": "Di-SkilLV2"})
     finished, probe = ax.get_lines()
     assert (finished.get_alpha(), finished.get_label()) == (None, "Di-SkilL")
-    assert (probe.get_alpha(), probe.get_label()) == (0.45, "Di-SkilLV2 (probe, 900/4500 step)")
+    assert (probe.get_alpha(), probe.get_label()) == (
+        0.45, "Di-SkilLV2 (probe, 900/4500 iterations)")
     assert probe.get_linestyle() == "-"  # the method's own style stays
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
-    assert texts == ["Di-SkilL", "Di-SkilLV2 (probe, 900/4500 step)"]
+    assert texts == ["Di-SkilL", "Di-SkilLV2 (probe, 900/4500 iterations)"]
     assert ax.get_legend().get_texts()[0].get_fontsize() == 8
     with pytest.raises(ValueError, match=r"no curve label .* method\(s\) \['diskill-v2'\]"):
         fs.mark_probes(ax, {"diskill": "Di-SkilL"})

@@ -201,7 +201,7 @@ def test_unusable_runs_are_listed_and_not_recorded(root, capsys):
     _other_code(root / stale.name)
     out = _record(root, capsys)
     assert out[:2] == [
-        f"not recorded  partial  {partial.name}  (2/2 step)",
+        f"not recorded  partial  {partial.name}  (2/2 iterations)",
         f"not recorded  failed   {failed.name}  (diverged at step 1: non-finite x)",
     ]
     assert out[2].startswith(f"not recorded  stale    {stale.name}  (made by other code; "

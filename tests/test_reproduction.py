@@ -58,7 +58,7 @@ def test_claims_met_not_met_pending_and_smoke(beer_pong, tmp_path):
     probe = _run(tmp_path, "svsl-probe", BP, [0.0])
     mixed = FigureSet("fig3-2", "full", {"SVSL": [*beer_pong.runs["SVSL"], tt, probe],
                                          "HiREPS": beer_pong.runs["HiREPS"]},
-                      probes={"svsl-probe": "10/52600 step"})  # fmt: skip
+                      probes={"svsl-probe": "10/52600 iterations"})  # fmt: skip
     assert verdicts("fig3-2", mixed, "test_success", reps=200)["seeds"][0] == {"SVSL": 4}
 
 

@@ -78,10 +78,10 @@ def test_figures_without_claims_are_refused():
 
 def test_a_method_still_training_says_how_far(tmp_path):
     svsl = [_run(tmp_path, "s0", "test_success", [0.0, 0.5])]
-    fs = FigureSet("fig3-2", "full", {"SVSL": svsl}, probes={"s0": "300/52600 step"})
+    fs = FigureSet("fig3-2", "full", {"SVSL": svsl}, probes={"s0": "300/52600 iterations"})
     (ax,) = results_figure({"fig3-2": fs}, reps=50).axes
     labels = [t.get_text() for t in ax.get_yticklabels()]
-    assert labels == ["SVSL (ours): still training (300/52600 step)",
+    assert labels == ["SVSL (ours): still training (300/52600 iterations)",
                       "HiREPS (ours): no finished run"]  # fmt: skip
     assert _points(ax) == {}  # a probe is drawn by the chapter's figure, not scored here
     assert "2 pending" in ax.get_title()

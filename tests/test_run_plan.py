@@ -8,7 +8,7 @@ import json
 import pytest
 
 from vslbook.cli import main
-from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs, plan, plan_text
+from vslbook.experiments.run_plan import FIGURE_MODULES, FigureRun, figure_runs, plan, plan_text
 
 
 @pytest.mark.parametrize("budget", ["smoke", "reduced", "full"])
@@ -105,3 +105,16 @@ def test_plan_keeps_only_the_runs_asked_for(capsys, tmp_path, monkeypatch):
                  "--methods", "sac"]) == 2  # fmt: skip
     assert "vslbook: error: fig4-4a at reduced draws no method 'sac'; expected one of" in \
         capsys.readouterr().err
+
+
+def test_progress_names_the_unit_in_words():
+    """A probe's progress reads "900/4500 iterations" (unit ``step``: one metrics row per
+    iteration) or "24000/50000 env steps"; an unknown unit is printed as it is."""
+    run = FigureRun("fig4-4c", "diskill", "diskill", "vslbook/TableTennisHard-v0", 0, "full",
+                    4500)  # fmt: skip
+    assert run.progress(900) == "900/4500 iterations"
+    dime = FigureRun("fig5-3", "dime", "dime", "dm_control/cheetah-run-v0", 0, "full", 50_000,
+                     unit="env_steps")  # fmt: skip
+    assert dime.progress(24_000) == "24000/50000 env steps"
+    assert FigureRun("f", "m", "a", "e", 0, "smoke", 2, unit="episodes").progress(1) == (
+        "1/2 episodes")

@@ -96,7 +96,7 @@ class FigureSet:
         seeds_full: method → the seeds the figure has at the ``full`` budget (the thesis's).
         not_drawn: recorded runs that today's declaration of the figure no longer names
             (their configuration changed since they were recorded).
-        probes: name → progress (e.g. ``900/4500 step``) of the recorded runs that were
+        probes: name → progress (e.g. ``900/4500 iterations``) of the recorded runs that were
             still training when recorded (``vslbook record --partial``): drawn as probes.
     """
 
@@ -127,7 +127,7 @@ class FigureSet:
         return sum(p.name not in self.probes for p in self.runs.get(method, []))
 
     def probe_progress(self) -> dict[str, str]:
-        """method → how far its probes had trained when recorded (``"900/4500 step"``,
+        """method → how far its probes had trained when recorded (``"900/4500 iterations"``,
         several joined by ", "), for the methods that have a probe."""
         out: dict[str, list[str]] = {}
         for method, paths in self.runs.items():
@@ -138,7 +138,7 @@ class FigureSet:
 
     def mark_probes(self, ax: Any, labels: dict[str, str]) -> None:
         """Draw the curves of ``ax`` that come from probes faded (their method's line style
-        is kept: every style is some method's), with "(probe, 900/4500 step)" in their legend
+        is kept: every style is some method's), with "(probe, 900/4500 iterations)" in their legend
         entry; ``labels`` maps a method to its curve's label.
 
         Raises:
@@ -159,7 +159,7 @@ class FigureSet:
             ax.legend(fontsize=old.get_texts()[0].get_fontsize() if old.get_texts() else None)
 
     def probe_note(self, path: str | Path) -> str:
-        """``", probe at 300/4500 step"`` for a run still training when recorded (to put in
+        """``", probe at 300/4500 iterations"`` for a run still training when recorded (to put in
         the title of a panel drawn from that one run), else ``""``."""
         name = Path(path).name
         return f", probe at {self.probes[name]}" if name in self.probes else ""
@@ -258,7 +258,7 @@ def _assemble(figure: str, b: Budget, declared: list[FigureRun], root: Path,
             if not RunDir(recorded[r.name]).done:
                 rows = RunDir(recorded[r.name]).metrics()
                 step = int(rows[-1].get(r.unit, 0) or 0) if rows else 0
-                out.probes[r.name] = f"{step}/{r.length} {r.unit}"
+                out.probes[r.name] = r.progress(step)
     out.not_drawn = sorted(set(recorded) - {r.name for r in figure_runs(figure, b)})
     return out
 

@@ -61,7 +61,7 @@ from vslbook.data import (
     verify_file,
 )
 from vslbook.experiments.recorded_runs import record_checkpoints
-from vslbook.experiments.run_plan import FIGURE_MODULES, figure_runs
+from vslbook.experiments.run_plan import FIGURE_MODULES, FigureRun, figure_runs
 from vslbook.jsonfiles import atomic_write, json_bytes
 from vslbook.results import RunDir, RunDirError
 
@@ -208,7 +208,7 @@ class RecordReport:
     probes: dict[str, str] = field(default_factory=dict)  # name -> progress, e.g. 900/4500
 
 
-def _state(rd: RunDir, length: int, unit: str, partial: bool = False) -> tuple[str, str]:
+def _state(rd: RunDir, run: FigureRun, partial: bool = False) -> tuple[str, str]:
     """(state, detail) of a run directory; state ``ok`` means it can be recorded
     (``probe``: a partial run with a checkpoint, recorded up to it where ``partial``).
 
@@ -222,7 +222,7 @@ def _state(rd: RunDir, length: int, unit: str, partial: bool = False) -> tuple[s
         return "failed", str((rd.failure or {}).get("message", ""))
     if not rd.done:
         rows = _CheckpointRows(rd).metrics() if rd.checkpoint_path.is_file() else []
-        detail = f"{int(rows[-1].get(unit, 0) or 0) if rows else 0}/{length} {unit}"
+        detail = run.progress(int(rows[-1].get(run.unit, 0) or 0) if rows else 0)
         if not partial or not rows:
             return "partial", detail
         if not rd.code_matches:
@@ -347,7 +347,7 @@ def record(figure: str, budget: Budget | str | None = None, root: str | os.PathL
     fresh: dict[str, tuple[RunDir, Any]] = {}
     for run in runs:
         rd = RunDir(root / run.name)
-        state, detail = _state(rd, run.length, run.unit, partial)
+        state, detail = _state(rd, run, partial)
         if state in ("ok", "probe"):
             fresh[run.name] = (rd, run)
             report.recorded.append(run.name)

@@ -34,8 +34,11 @@ from typing import Any
 
 from vslbook.budget import Budget, get_budget
 
-__all__ = ["FIGURE_MODULES", "FigureRun", "PlanRow", "figure_runs", "plan", "plan_text",
-           "recorded_times"]
+__all__ = ["FIGURE_MODULES", "UNIT_WORDS", "FigureRun", "PlanRow", "figure_runs", "plan",
+           "plan_text", "recorded_times"]
+
+#: a run's unit (the metrics column that counts its progress) → how a reader calls it
+UNIT_WORDS: dict[str, str] = {"step": "iterations", "env_steps": "env steps"}
 
 #: figure id → the chapter module whose ``figure_runs(figure, budget)`` declares its runs
 FIGURE_MODULES: dict[str, str] = {
@@ -70,6 +73,11 @@ class FigureRun:
     length: int
     unit: str = "step"
     overrides: dict[str, Any] = field(default_factory=dict)
+
+    def progress(self, done: int) -> str:
+        """How far the run has trained, in words: ``"900/4500 iterations"`` (unit ``step``:
+        one row per iteration), ``"24000/50000 env steps"`` (unit ``env_steps``)."""
+        return f"{done}/{self.length} {UNIT_WORDS.get(self.unit, self.unit)}"
 
     @property
     def name(self) -> str:
@@ -215,7 +223,7 @@ def plan_text(rows: list[PlanRow]) -> str:
     for row in rows:
         notes = [row.note] if row.note else []
         if row.state == "partial":
-            notes.insert(0, f"{row.progress}/{row.run.length} {row.run.unit}")
+            notes.insert(0, row.run.progress(row.progress))
         extra = f" ({'; '.join(notes)})" if notes else ""
         lines.append(f"{row.state:8s} {row.run.name}{extra}")
     todo = [r for r in rows if r.state in ("partial", "missing")]
