@@ -1103,7 +1103,10 @@ for goal in goals:
 # curve spans half the axis) and the others 2 % with at most 5 experts
 # (`vslbook.experiments.diskill_runs.REDUCED`), so only the 5LR panel is meant to show the
 # thesis's ordering; at `smoke` the panels only show that the code runs (2 iterations,
-# 2 experts with 4 samples each).
+# 2 experts with 4 samples each). Where `data/results/` holds probes of the hard tasks
+# (Di-SkilL and BBRL, seed 0, at the full budget's counts but stopped after the first
+# 900 or more of the 4500 iterations), a panel draws them instead, faded, with how far
+# they trained in the legend: they show where success starts, not the end of training.
 
 # %% tags=["full-width"]
 FIGS_4 = ("4.3c", "4.4a", "4.4b", "4.4c", "4.4d")
