@@ -1131,9 +1131,9 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
     sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: faded, "(probe, …)"
     c = DR.counts(task, "diskill", sets[figure].budget)
     probe = " (probes)" if sets[figure].probes else ""
+    seeds = count_phrase(sets[figure].finished("diskill"), "finished seed" if probe else "seed")
     ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}, {c['iterations']} "
-                 f"iterations, {count_phrase(sets[figure].finished('diskill'), 'seed')}",
-                 fontsize=10)  # fmt: skip
+                 f"iterations, {seeds}", fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
 annotate(fig, *sets.values())  # where the runs came from, under the figure
