@@ -43,6 +43,7 @@ def test_declared_runs_are_the_runs_the_run_sets_train(figure, budget):
     assert FIGURE_MODULES[figure] == "vslbook.experiments.ch5_runs"
     assert figure_metric(figure) == METRIC[figure] == "eval_return"
     assert all(r.unit == "step" and r.budget == b.name for r in runs)
+    assert all(r.words == "env steps" for r in runs)  # DIME's step counts env steps
     assert all(isinstance(v, str) for r in runs for v in r.overrides.values())
 
 

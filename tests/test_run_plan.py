@@ -4,6 +4,7 @@ plan`` lists, for every registered figure and budget, and ``plan`` reads a root'
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 
@@ -118,3 +119,49 @@ def test_progress_names_the_unit_in_words():
     assert dime.progress(24_000) == "24000/50000 env steps"
     assert FigureRun("f", "m", "a", "e", 0, "smoke", 2, unit="episodes").progress(1) == (
         "1/2 episodes")
+
+
+def _partial_run(root, run, rows):
+    """A run directory with a config and ``rows`` of metrics, no checkpoint: ``partial``."""
+    path = root / run.name
+    path.mkdir()
+    (path / "config.json").write_text(json.dumps({"algo": run.algo, "env": run.env}))
+    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+
+
+def test_plan_times_runs_counted_in_env_steps_by_their_step_rate(tmp_path, monkeypatch):
+    """A DIME run's ``step`` counts env steps and its rows log no ``iteration_seconds``:
+    its seconds per env step are the inverse of each row's ``env_steps_per_s``, and its
+    progress reads in env steps; a PPO run (column ``env_steps``) is timed the same way."""
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))  # no recorded times
+    dime = figure_runs("fig5-ablations", "smoke")[0]
+    assert dime.words == "env steps"
+    rates = [250.0, 500.0, 1000.0, 125.0]  # the last quarter: one row, 1/125 s per step
+    _partial_run(tmp_path, dime, [{"step": 100 * (i + 1), "env_steps_per_s": v}
+                                  for i, v in enumerate(rates)])  # fmt: skip
+    rows = {r.run.name: r for r in plan("fig5-ablations", "smoke", tmp_path)}
+    mine = rows[dime.name]
+    assert (mine.state, mine.progress) == ("partial", 400)
+    assert mine.seconds_per_unit == pytest.approx(0.008)
+    assert mine.hours_left == pytest.approx((dime.length - 400) * 0.008 / 3600)
+    same = [r for r in rows.values() if r.run.algo == dime.algo and r.run.name != dime.name
+            and r.run.overrides == dime.overrides]  # fmt: skip
+    # its other seeds: the mean over every row, (4 + 2 + 1 + 8) / 4 ms
+    assert same and all(r.seconds_per_unit == pytest.approx(0.00375) for r in same)
+    assert f"{dime.name} (400/{dime.length} env steps" in plan_text([mine])
+
+    ppo = next(r for r in figure_runs("fig4-3c", "reduced") if r.algo == "ppo-ch4")
+    assert (ppo.unit, ppo.words) == ("env_steps", "env steps")
+    _partial_run(tmp_path, ppo, [{"env_steps": 2048, "env_steps_per_s": 512.0}])
+    row = next(r for r in plan("fig4-3c", "reduced", tmp_path) if r.run.name == ppo.name)
+    assert (row.progress, row.seconds_per_unit) == (2048, pytest.approx(1 / 512))
+
+
+def test_plan_does_not_time_iterations_by_a_step_rate(tmp_path, monkeypatch):
+    """An iteration-counted run whose rows carry only a step rate is not timed with it."""
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    run = figure_runs("fig4-4a", "reduced")[0]
+    assert run.words == "iterations"
+    _partial_run(tmp_path, run, [{"step": 1, "env_steps_per_s": 100.0}])
+    row = next(r for r in plan("fig4-4a", "reduced", tmp_path) if r.run.name == run.name)
+    assert row.state == "partial" and math.isnan(row.seconds_per_unit)

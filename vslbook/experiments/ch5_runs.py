@@ -90,7 +90,8 @@ def figure_runs(figure: str, budget: Budget | str | None = None) -> list[FigureR
         config = config_from_overrides(spec.config, over, spec.default_config(rs.env, b, over))
         length = Schedule.of(config, b).total_steps
         sets = {k: set_string(v) for k, v in over.items()}
-        runs += [FigureRun(figure, label, algo, rs.env, seed, b.name, length, overrides=sets)
+        runs += [FigureRun(figure, label, algo, rs.env, seed, b.name, length, overrides=sets,
+                           counts="env steps")  # DIME's ``step`` counts env steps
                  for seed in range(rs.seeds)]  # fmt: skip
     return runs
 

@@ -35,7 +35,7 @@ from typing import Any
 from vslbook.budget import Budget, get_budget
 
 __all__ = ["FIGURE_MODULES", "UNIT_WORDS", "FigureRun", "PlanRow", "figure_runs", "plan",
-           "plan_text", "recorded_times"]
+           "plan_text", "recorded_times", "unit_seconds"]
 
 #: a run's unit (the metrics column that counts its progress) → how a reader calls it
 UNIT_WORDS: dict[str, str] = {"step": "iterations", "env_steps": "env steps"}
@@ -60,6 +60,9 @@ class FigureRun:
         algo, env, seed, budget: what ``vslbook run`` takes.
         length: the run's length in ``unit``.
         unit: the metrics column that counts progress (``step`` or e.g. ``env_steps``).
+        counts: what one unit is, in words, where the column's name does not say it (a DIME
+            run's ``step`` counts environment steps: ``"env steps"``); empty: from
+            :data:`UNIT_WORDS`.
         overrides: config fields set beside the budget's preset, as ``vslbook run --set``
             strings (empty where the preset is the run).
     """
@@ -73,11 +76,18 @@ class FigureRun:
     length: int
     unit: str = "step"
     overrides: dict[str, Any] = field(default_factory=dict)
+    counts: str = ""
+
+    @property
+    def words(self) -> str:
+        """What the run's length counts, in words (``"iterations"``, ``"env steps"``)."""
+        return self.counts or UNIT_WORDS.get(self.unit, self.unit)
 
     def progress(self, done: int) -> str:
         """How far the run has trained, in words: ``"900/4500 iterations"`` (unit ``step``:
-        one row per iteration), ``"24000/50000 env steps"`` (unit ``env_steps``)."""
-        return f"{done}/{self.length} {UNIT_WORDS.get(self.unit, self.unit)}"
+        one row per iteration), ``"24000/50000 env steps"`` (unit ``env_steps``, or a DIME
+        run's ``step``)."""
+        return f"{done}/{self.length} {self.words}"
 
     @property
     def name(self) -> str:
@@ -144,8 +154,21 @@ class PlanRow:
         return (self.run.length - self.progress) * self.seconds_per_unit / 3600.0
 
 
-def _state(path: Path, unit: str) -> tuple[str, int, list[float], str]:
-    """(state, progress, per-unit seconds measured, note) of the run directory ``path``.
+def unit_seconds(rows: list[dict[str, Any]], run: FigureRun) -> list[float]:
+    """Seconds per unit of ``run`` that each of its metrics rows measured: an iteration's
+    ``iteration_seconds``; for a run counted in env steps (PPO, DIME), the inverse of the
+    row's ``env_steps_per_s`` (training's wall clock since the previous row, evaluations
+    left out; seeds that DIME trains side by side in one process share that clock, so each
+    seed's rate is the group's)."""
+    if run.words == "env steps":
+        return [1.0 / r["env_steps_per_s"] for r in rows if (r.get("env_steps_per_s") or 0) > 0]
+    if run.unit != "step":
+        return []
+    return [r["iteration_seconds"] for r in rows if r.get("iteration_seconds") is not None]
+
+
+def _state(path: Path, run: FigureRun) -> tuple[str, int, list[float], str]:
+    """(state, progress, per-unit seconds measured, note) of ``run``'s directory ``path``.
 
     A run made by code other than today's keeps its state with the note ``code changed``:
     whether it is stale is decided by replaying its first rows (:mod:`vslbook.replay`)
@@ -157,8 +180,8 @@ def _state(path: Path, unit: str) -> tuple[str, int, list[float], str]:
         return "missing", 0, [], ""
     rd = RunDir(path)
     rows = rd.metrics()
-    progress = int(rows[-1].get(unit, 0) or 0) if rows else 0
-    times = [r["iteration_seconds"] for r in rows if r.get("iteration_seconds") is not None]
+    progress = int(rows[-1].get(run.unit, 0) or 0) if rows else 0
+    times = unit_seconds(rows, run)
     note = "" if rd.code_matches else "code changed: replayed when resumed or recorded"
     if rd.failed:
         return "failed", progress, times, note
@@ -179,12 +202,12 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
     happens between iterations (SVSL's tests, checkpoints), so the hours are a lower bound.
     """
     runs = figure_runs(figure, budget)
-    states = [_state(Path(root) / r.name, r.unit) for r in runs]
+    states = [_state(Path(root) / r.name, r) for r in runs]
     by_method: dict[tuple[str, str], list[float]] = {}
     for r, (_, _, times, _) in zip(runs, states, strict=True):
         by_method.setdefault((r.algo, r.env), []).extend(times)
     if not all(by_method.values()):  # a method with no run here: its recorded runs' times
-        for key, times in recorded_times(figure, get_budget(budget).name).items():
+        for key, times in recorded_times(figure, get_budget(budget).name, runs).items():
             if key in by_method and not by_method[key]:
                 by_method[key] = times
     rows = []
@@ -192,26 +215,35 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
         if state == "missing" and recorded is not None and recorded(r):
             state = "recorded"
         pool = times[-max(1, len(times) // 4):] if times else by_method[(r.algo, r.env)]
-        per = statistics.fmean(pool) if pool and r.unit == "step" else math.nan
+        per = statistics.fmean(pool) if pool else math.nan
         rows.append(PlanRow(r, state, progress, per, note))
     return rows
 
 
-def recorded_times(figure: str, budget: str) -> dict[tuple[str, str], list[float]]:
-    """(algo, env) → the ``iteration_seconds`` of ``figure``'s recorded runs, from the set at
-    ``budget`` where it has the method, else from the largest budget that has it (an
-    iteration's cost depends on counts such as the number of experts, so this is a guess
-    until a run of the budget is timed)."""
+def recorded_times(
+    figure: str, budget: str, runs: list[FigureRun] | None = None
+) -> dict[tuple[str, str], list[float]]:
+    """(algo, env) → the seconds per unit (:func:`unit_seconds`) of ``figure``'s recorded
+    runs, from the set at ``budget`` where it has the method, else from the largest budget
+    that has it (an iteration's cost depends on counts such as the number of experts, so
+    this is a guess until a run of the budget is timed). ``runs``: the figure's runs at
+    ``budget`` (default :func:`figure_runs`), which say what each method's unit counts."""
     from vslbook.experiments.record import read_set, recorded_dir
 
+    declared = {(r.algo, r.env): r for r in (runs or figure_runs(figure, budget))}
     out: dict[tuple[str, str], list[float]] = {}
     for name in dict.fromkeys((budget, "full", "reduced", "smoke")):
-        runs, evals, _ = read_set(recorded_dir(figure, name))
-        times = evals[evals["metric"] == "iteration_seconds"].dropna(subset=["value"])
+        table, evals, _ = read_set(recorded_dir(figure, name))
+        timing = evals[evals["metric"].isin(("iteration_seconds", "env_steps_per_s"))]
+        timing = timing.dropna(subset=["value"])
         found: dict[tuple[str, str], list[float]] = {}
-        for row in runs.itertuples():
+        for row in table.itertuples():
+            if (row.algo, row.env) not in declared:
+                continue
+            mine = timing[timing["run"] == row.run]
+            rows = [{m: v} for m, v in zip(mine["metric"], mine["value"], strict=True)]
             found.setdefault((row.algo, row.env), []).extend(
-                times.loc[times["run"] == row.run, "value"].tolist())
+                unit_seconds(rows, declared[(row.algo, row.env)]))
         out |= {key: values for key, values in found.items() if values and key not in out}
     return out
 

@@ -106,8 +106,8 @@ def _train_one(run: FigureRun, root: str, until: int | None = None) -> tuple[str
     torch.set_num_threads(1)
     kwargs = {}
     if until is not None:
-        if run.unit != "step":
-            return "skipped", f"--until counts iterations; {run.name} counts {run.unit}"
+        if run.words != "iterations":
+            return "skipped", f"--until counts iterations; {run.name} counts {run.words}"
         if RunDir(Path(root) / run.name).done:
             return "done", ""
         left = until - checkpoint_step(Path(root) / run.name)
