@@ -76,12 +76,9 @@ def test_plan_estimates_from_the_recent_mean_cost(tmp_path, monkeypatch):
     monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))  # no recorded times
     runs = figure_runs("fig4-4a", "reduced")  # three seeds of each method
     first, second = runs[0], next(r for r in runs[1:] if r.algo == runs[0].algo)
-    run = tmp_path / first.name
-    run.mkdir()
-    (run / "config.json").write_text(json.dumps({"algo": first.algo, "env": first.env}))
     times = [1.0] * 9 + [2.0, 3.0, 7.0]  # the last quarter: mean 4 s (median 3 s)
-    (run / "metrics.jsonl").write_text("".join(
-        json.dumps({"step": i + 1, "iteration_seconds": t}) + "\n" for i, t in enumerate(times)))
+    _partial_run(tmp_path, first, [{"step": i + 1, "iteration_seconds": t}
+                                   for i, t in enumerate(times)])  # fmt: skip
     rows = {r.run.name: r for r in plan("fig4-4a", "reduced", tmp_path)}
     mine = rows[first.name]
     assert (mine.state, mine.progress, mine.seconds_per_unit) == ("partial", 12, 4.0)
@@ -121,12 +118,43 @@ def test_progress_names_the_unit_in_words():
         "1/2 episodes")
 
 
-def _partial_run(root, run, rows):
-    """A run directory with a config and ``rows`` of metrics, no checkpoint: ``partial``."""
+def _partial_run(root, run, rows, saved=None):
+    """A run directory with a config, ``rows`` of metrics and a checkpoint saved after the
+    first ``saved`` of them (default all): ``partial``."""
+    from vslbook.results import RunDir
+
     path = root / run.name
     path.mkdir()
     (path / "config.json").write_text(json.dumps({"algo": run.algo, "env": run.env}))
-    (path / "metrics.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    line = [json.dumps(r) + "\n" for r in rows]
+    saved = len(rows) if saved is None else saved
+    (path / "metrics.jsonl").write_text("".join(line[:saved]))
+    RunDir(path).save_checkpoint({})
+    with open(path / "metrics.jsonl", "a", encoding="utf-8") as fh:
+        fh.write("".join(line[saved:]))
+
+
+def test_plan_counts_progress_to_the_checkpoint(tmp_path, monkeypatch):
+    """A partial run resumes from its checkpoint: the rows logged after it are dropped, so
+    its progress (and hours left) count the iterations the checkpoint saved; they still
+    time the run. Without a checkpoint, it starts again from 0."""
+    from vslbook.experiments.train_figure import checkpoint_step
+
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    first, second = figure_runs("fig4-4a", "reduced")[:2]
+    _partial_run(tmp_path, first, [{"step": i + 1, "iteration_seconds": 2.0}
+                                   for i in range(10)], saved=6)  # fmt: skip
+    row = next(r for r in plan("fig4-4a", "reduced", tmp_path) if r.run.name == first.name)
+    assert (row.state, row.progress, row.seconds_per_unit) == ("partial", 6, 2.0)
+    assert row.hours_left == pytest.approx((first.length - 6) * 2.0 / 3600)
+    assert checkpoint_step(tmp_path / first.name) == 6
+    assert f"{first.name} (6/{first.length} iterations" in plan_text([row])
+    (tmp_path / second.name).mkdir()
+    (tmp_path / second.name / "config.json").write_text("{}")
+    (tmp_path / second.name / "metrics.jsonl").write_text('{"step": 1}\n')
+    row = next(r for r in plan("fig4-4a", "reduced", tmp_path) if r.run.name == second.name)
+    assert (row.state, row.progress) == ("partial", 0)
+    assert checkpoint_step(tmp_path / second.name) == 0
 
 
 def test_plan_times_runs_counted_in_env_steps_by_their_step_rate(tmp_path, monkeypatch):
@@ -165,3 +193,26 @@ def test_plan_does_not_time_iterations_by_a_step_rate(tmp_path, monkeypatch):
     _partial_run(tmp_path, run, [{"step": 1, "env_steps_per_s": 100.0}])
     row = next(r for r in plan("fig4-4a", "reduced", tmp_path) if r.run.name == run.name)
     assert row.state == "partial" and math.isnan(row.seconds_per_unit)
+
+
+def test_plan_of_probes_trains_each_run_to_the_iteration_asked(tmp_path, monkeypatch):
+    """``plan(until=N)`` plans what ``vslbook train --until N`` trains: runs counted in
+    iterations to min(N, length), runs counted in env steps not at all."""
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    first = figure_runs("fig4-4a", "reduced")[0]
+    _partial_run(tmp_path, first, [{"step": i + 1, "iteration_seconds": 3.0}
+                                   for i in range(6)])  # fmt: skip
+    mine = {u: next(r for r in plan("fig4-4a", "reduced", tmp_path, until=u)
+                    if r.run.name == first.name) for u in (10, 6, 10_000)}  # fmt: skip
+    assert (mine[10].end, mine[10].hours_left) == (10, pytest.approx(4 * 3.0 / 3600))
+    assert mine[6].hours_left == 0.0 and not mine[6].to_train
+    assert mine[10_000].end == first.length
+    assert f"{first.name} (6/{first.length} iterations; probe to 10" in plan_text([mine[10]])
+    assert "probe to" not in plan_text([mine[6]])  # reached
+    assert plan_text([mine[6]]).splitlines()[-1] == "nothing left to train"
+    assert plan_text([mine[10]]).splitlines()[-1] == (
+        "0.0 core-hours left for 1 runs (probes to iteration 10)")
+    ppo = next(r for r in plan("fig4-3c", "reduced", tmp_path, until=10)
+               if r.run.algo == "ppo-ch4")  # fmt: skip
+    assert (ppo.hours_left, ppo.to_train) == (0.0, False)
+    assert ppo.note == "--until counts iterations, not env steps"

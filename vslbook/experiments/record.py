@@ -61,7 +61,7 @@ from vslbook.data import (
     verify_file,
 )
 from vslbook.experiments.recorded_runs import record_checkpoints
-from vslbook.experiments.run_plan import FIGURE_MODULES, FigureRun, figure_runs
+from vslbook.experiments.run_plan import FIGURE_MODULES, FigureRun, figure_runs, saved_rows
 from vslbook.jsonfiles import atomic_write, json_bytes
 from vslbook.results import RunDir, RunDirError
 
@@ -221,7 +221,7 @@ def _state(rd: RunDir, run: FigureRun, partial: bool = False) -> tuple[str, str]
     if rd.failed:
         return "failed", str((rd.failure or {}).get("message", ""))
     if not rd.done:
-        rows = _CheckpointRows(rd).metrics() if rd.checkpoint_path.is_file() else []
+        rows = saved_rows(rd.path)
         detail = run.progress(int(rows[-1].get(run.unit, 0) or 0) if rows else 0)
         if not partial or not rows:
             return "partial", detail
@@ -241,19 +241,16 @@ def _state(rd: RunDir, run: FigureRun, partial: bool = False) -> tuple[str, str]
     return "ok", ""
 
 
-class _CheckpointRows:
-    """A partial run's rows up to its checkpoint (those a resume keeps), as
-    :func:`vslbook.data.evals_frame` reads a run: ``name`` and ``metrics()``."""
+class _SavedRows:
+    """A partial run's rows up to its checkpoint (those a resume keeps,
+    :func:`~vslbook.experiments.run_plan.saved_rows`), as :func:`vslbook.data.evals_frame`
+    reads a run: ``name`` and ``metrics()``."""
 
     def __init__(self, rd: RunDir) -> None:
-        import torch
-
         self.rd, self.name = rd, rd.name
-        state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False)
-        self.lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
 
     def metrics(self) -> list[dict[str, Any]]:
-        return self.rd.metrics()[: self.lines]
+        return saved_rows(self.rd.path)
 
 
 def _replay(rd: RunDir) -> str | None:
@@ -374,7 +371,7 @@ def record(figure: str, budget: Budget | str | None = None, root: str | os.PathL
     runs_frame = pd.DataFrame([run_rows[n] for n in names], columns=RUNS_COLUMNS)
     runs_frame["seed"] = runs_frame["seed"].astype("int64")
     def rows_of(rd: RunDir) -> Any:  # a probe's rows up to its checkpoint
-        return rd if rd.done else _CheckpointRows(rd)
+        return rd if rd.done else _SavedRows(rd)
 
     parts = [evals_frame([rows_of(fresh[n][0])]) if n in fresh
              else old_evals[old_evals["run"] == n] for n in names]  # fmt: skip

@@ -11,7 +11,7 @@ uses this one declaration:
   :func:`plan` lists;
 * the notebooks and ``vslbook figure`` train (or reuse) them with :meth:`FigureRun.train`;
 * :func:`plan` (``vslbook plan FIGURE``) says for each run whether it is ``done``,
-  ``partial`` (and how far), ``missing``, ``failed`` or ``recorded`` (in
+  ``partial`` (and how far its checkpoint got), ``missing``, ``failed`` or ``recorded`` (in
   ``data/results/``), noting a run made by other code (``code changed``: it is stale only
   if replaying its first rows gives other numbers, which ``vslbook run`` and ``vslbook
   record`` check before they use it, moving a stale run to ``_stale/``), and estimates
@@ -35,7 +35,7 @@ from typing import Any
 from vslbook.budget import Budget, get_budget
 
 __all__ = ["FIGURE_MODULES", "UNIT_WORDS", "FigureRun", "PlanRow", "figure_runs", "plan",
-           "plan_text", "recorded_times", "unit_seconds"]
+           "plan_text", "recorded_times", "saved_rows", "unit_seconds"]
 
 #: a run's unit (the metrics column that counts its progress) → how a reader calls it
 UNIT_WORDS: dict[str, str] = {"step": "iterations", "env_steps": "env steps"}
@@ -146,12 +146,44 @@ class PlanRow:
     progress: int = 0  # units done (``run.unit``)
     seconds_per_unit: float = math.nan  # measured by this run, or its method's others
     note: str = ""  # e.g. that the code changed since the run was made
+    target: int | None = None  # units to train it to (a probe's ``--until``); None: its length
+
+    @property
+    def end(self) -> int:
+        """Where the plan trains the run to: ``target``, else the run's length."""
+        return self.run.length if self.target is None else self.target
+
+    @property
+    def to_train(self) -> bool:
+        """True when the run still has units to train (partial or missing, short of
+        :attr:`end`)."""
+        return self.state in ("partial", "missing") and self.progress < self.end
 
     @property
     def hours_left(self) -> float:
-        if self.state in ("done", "recorded", "failed"):
+        if not self.to_train:
             return 0.0
-        return (self.run.length - self.progress) * self.seconds_per_unit / 3600.0
+        return (self.end - self.progress) * self.seconds_per_unit / 3600.0
+
+
+def saved_rows(path: str | Path) -> list[dict[str, Any]]:
+    """The metrics rows of the run directory ``path`` that a resume keeps: all rows of a
+    finished run; of a partial one, the rows its checkpoint counts (``_metrics_lines``,
+    :meth:`vslbook.results.RunDir.save_checkpoint`; rows logged after it are dropped on
+    resume); none without a checkpoint."""
+    import torch
+
+    from vslbook.results import RunDir
+
+    rd = RunDir(path)
+    if rd.done:
+        return rd.metrics()
+    if not rd.checkpoint_path.is_file():
+        return []
+    # memory-mapped: only the small count is read, not the networks or a replay buffer
+    state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False, mmap=True)
+    lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
+    return rd.metrics()[:lines]
 
 
 def unit_seconds(rows: list[dict[str, Any]], run: FigureRun) -> list[float]:
@@ -179,8 +211,8 @@ def _state(path: Path, run: FigureRun) -> tuple[str, int, list[float], str]:
     if not (path / RunDir.CONFIG).is_file():
         return "missing", 0, [], ""
     rd = RunDir(path)
-    rows = rd.metrics()
-    progress = int(rows[-1].get(run.unit, 0) or 0) if rows else 0
+    rows, saved = rd.metrics(), saved_rows(path)  # progress: where a resume starts
+    progress = int(saved[-1].get(run.unit, 0) or 0) if saved else 0
     times = unit_seconds(rows, run)
     note = "" if rd.code_matches else "code changed: replayed when resumed or recorded"
     if rd.failed:
@@ -189,10 +221,14 @@ def _state(path: Path, run: FigureRun) -> tuple[str, int, list[float], str]:
 
 
 def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "runs",
-         recorded: Callable[[FigureRun], bool] | None = None) -> list[PlanRow]:  # fmt: skip
+         recorded: Callable[[FigureRun], bool] | None = None,
+         until: int | None = None) -> list[PlanRow]:  # fmt: skip
     """The state of every run ``figure`` needs at ``budget`` in ``root``.
 
     ``recorded(run)`` says whether a run missing from ``root`` is in ``data/results/``.
+    ``until``: plan probes, as ``vslbook train --until``: each run counted in iterations
+    is trained to iteration ``until`` (at most its length); runs counted in env steps are
+    not trained.
     A run's seconds per unit are the mean of its own most recent measurements (the last
     quarter of its iterations: an SVSL iteration costs more as experts are added), else the
     mean of its method's other runs in the plan, else of its method's recorded runs
@@ -216,7 +252,14 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
             state = "recorded"
         pool = times[-max(1, len(times) // 4):] if times else by_method[(r.algo, r.env)]
         per = statistics.fmean(pool) if pool else math.nan
-        rows.append(PlanRow(r, state, progress, per, note))
+        target = None
+        if until is not None:
+            if r.words == "iterations":
+                target = min(until, r.length)
+            else:
+                target, note = progress, "; ".join(
+                    filter(None, [note, f"--until counts iterations, not {r.words}"]))
+        rows.append(PlanRow(r, state, progress, per, note, target))
     return rows
 
 
@@ -254,14 +297,18 @@ def plan_text(rows: list[PlanRow]) -> str:
     lines = []
     for row in rows:
         notes = [row.note] if row.note else []
+        if row.target is not None and row.to_train:
+            notes.insert(0, f"probe to {row.target}")
         if row.state == "partial":
             notes.insert(0, row.run.progress(row.progress))
         extra = f" ({'; '.join(notes)})" if notes else ""
         lines.append(f"{row.state:8s} {row.run.name}{extra}")
-    todo = [r for r in rows if r.state in ("partial", "missing")]
+    todo = [r for r in rows if r.to_train]
     known = [r.hours_left for r in todo if not math.isnan(r.hours_left)]
     unknown = len(todo) - len(known)
     total = f"{sum(known):.1f} core-hours left for {len(known)} runs"
+    if any(r.target is not None for r in rows):
+        total += f" (probes to iteration {max(r.target or 0 for r in rows)})"
     if unknown:
         total += f"; {unknown} runs not yet timed (train one of each method to estimate them)"
     lines.append(total if todo else "nothing left to train")

@@ -76,23 +76,11 @@ def select_runs(figure: str, budget: Budget | str | None = None, *,
 def checkpoint_step(path: str | Path) -> int:
     """The step of the last row a run's checkpoint covers (0 without a checkpoint): where
     the run resumes. Rows logged after the checkpoint are dropped on resume, so they do not
-    count."""
-    import json
+    count (:func:`~vslbook.experiments.run_plan.saved_rows`)."""
+    from vslbook.experiments.run_plan import saved_rows
 
-    import torch
-
-    from vslbook.results import RunDir
-
-    rd = RunDir(path)
-    if not rd.checkpoint_path.is_file():
-        return 0
-    state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False)
-    lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
-    if lines <= 0:
-        return 0
-    with open(rd.metrics_path, encoding="utf-8") as fh:
-        rows = [line for _, line in zip(range(lines), fh, strict=False)]
-    return int(json.loads(rows[-1])["step"]) if rows else 0
+    rows = saved_rows(path)
+    return int(rows[-1]["step"]) if rows else 0
 
 
 def _train_one(run: FigureRun, root: str, until: int | None = None) -> tuple[str, str]:
