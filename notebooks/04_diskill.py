@@ -68,7 +68,7 @@ from vslbook.bounds import show
 from vslbook.budget import get_budget
 from vslbook.data import measurements
 from vslbook.experiments.figure_sources import annotate, source_text
-from vslbook.plots import count_phrase, method_color, panel_grid, save_figure, use_style
+from vslbook.plots import method_color, panel_grid, save_figure, use_style
 
 budget = get_budget()
 use_style()
@@ -1131,9 +1131,8 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
     sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: faded, "(probe, …)"
     c = DR.counts(task, "diskill", sets[figure].budget)
     probe = " (probes)" if sets[figure].probes else ""
-    seeds = count_phrase(sets[figure].finished("diskill"), "finished seed" if probe else "seed")
     ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}, {c['iterations']} "
-                 f"iterations, {seeds}", fontsize=10)  # fmt: skip
+                 f"iterations, {sets[figure].seeds_phrase()}", fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
 annotate(fig, *sets.values())  # where the runs came from, under the figure
@@ -1228,7 +1227,7 @@ for ax, y in zip(axes, ("test_success", "test_return"), strict=True):
     tt_set.mark_probes(ax, DR.LABELS)
 c = DR.counts("table-tennis-4d", "diskill", tt_set.budget)
 fig.suptitle(f"Fig. 4.3b (ours, budget {tt_set.budget}: {c['iterations']} iterations, "
-             f"{count_phrase(tt_set.finished('diskill'), 'seed')}; thesis: 4500 iterations)",
+             f"{tt_set.seeds_phrase()}; thesis: 4500 iterations)",
              fontsize=10)  # fmt: skip
 fig.tight_layout()
 annotate(fig, tt_set)  # where the runs came from, under the figure
@@ -1310,7 +1309,7 @@ for ax, y, label in zip(axes, ("test_return", "test_max_height", "test_goal_dist
     ax.set_title(f"Fig. B.3{label[:3]}")
 c = DR.counts("hopper-jump", "diskill", sets["4.4a"].budget)
 fig.suptitle(f"Fig. B.3 (ours, budget {sets['4.4a'].budget}: {c['iterations']} iterations, "
-             f"{count_phrase(sets['4.4a'].finished('diskill'), 'seed')}; thesis: 1400 iterations, "
+             f"{sets['4.4a'].seeds_phrase()}; thesis: 1400 iterations, "
              "24 seeds)", fontsize=10)  # fmt: skip
 fig.tight_layout()
 annotate(fig, sets["4.4a"])  # where the runs came from, under the figure

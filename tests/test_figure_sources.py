@@ -272,6 +272,15 @@ def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
     assert fs.verdict("as in the thesis") == "as in the thesis"  # not every run a probe
     one = replace(fs, probes={"v0": "900/4500 iterations"})
     assert "diskill-v2 1 of 24 and 1 probe" in one.caption()
+    # a panel's title: the range of finished seeds over the methods that have one
+    assert fs.seeds_phrase() == one.seeds_phrase() == "1 finished seed"
+    more = replace(fs, runs={**runs, "bbrl": [tmp_path / "b0", tmp_path / "b1"]})
+    assert more.seeds_phrase() == "1–2 finished seeds"
+    assert replace(more, probes={}).seeds_phrase() == "1–2 seeds"
+    assert replace(fs, runs={"diskill": [tmp_path / "d0"], "bbrl": [tmp_path / "b0"]},
+                   probes={}).seeds_phrase() == "1 seed"  # fmt: skip
+    assert replace(fs, runs={"diskill-v2": runs["diskill-v2"]}).seeds_phrase() == (
+        "0 finished seeds")
 
 
 def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_path):

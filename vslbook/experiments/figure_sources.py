@@ -126,6 +126,18 @@ class FigureSet:
         """How many of ``method``'s runs are finished seeds (its probes not counted)."""
         return sum(p.name not in self.probes for p in self.runs.get(method, []))
 
+    def seeds_phrase(self) -> str:
+        """The finished seeds of the set's methods, for a panel's title: ``"3 seeds"`` where
+        every method has as many, ``"1–2 seeds"`` where they differ (:meth:`caption` gives
+        each method's), ``"finished seeds"`` where the set also draws probes (a method with
+        probes only is left out of the range, ``"0 finished seeds"`` where all are)."""
+        from vslbook.plots import count_phrase
+
+        counts = [n for m in self.runs if (n := self.finished(m))] or [0]
+        noun = "finished seed" if self.probes else "seed"
+        low, high = min(counts), max(counts)
+        return count_phrase(low, noun) if low == high else f"{low}–{high} {noun}s"
+
     def probe_progress(self) -> dict[str, str]:
         """method → how far its probes had trained when recorded (``"900/4500 iterations"``,
         several joined by ", "), for the methods that have a probe."""
