@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import pytest
 
@@ -216,3 +217,7 @@ def test_plan_of_probes_trains_each_run_to_the_iteration_asked(tmp_path, monkeyp
                if r.run.algo == "ppo-ch4")  # fmt: skip
     assert (ppo.hours_left, ppo.to_train) == (0.0, False)
     assert ppo.note == "--until counts iterations, not env steps"
+    for bad in (0, -3, 2.5, "900"):
+        with pytest.raises(ValueError, match=rf"until must be an iteration \(an integer >= 1\), "
+                                             rf"got {re.escape(repr(bad))}"):  # fmt: skip
+            plan("fig4-4a", "reduced", tmp_path, until=bad)

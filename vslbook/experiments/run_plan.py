@@ -236,7 +236,13 @@ def plan(figure: str, budget: Budget | str | None = None, root: str | Path = "ru
     costly iterations (SVSL's fine-tuning of every expert every 50th iteration, Di-SkilL's
     tests) are part of a run's cost. A run's logged ``iteration_seconds`` leave out what
     happens between iterations (SVSL's tests, checkpoints), so the hours are a lower bound.
+
+    Raises:
+        ValueError: ``until`` is not an iteration (an integer >= 1).
     """
+    if until is not None and (isinstance(until, bool) or not isinstance(until, int)
+                              or until < 1):  # fmt: skip
+        raise ValueError(f"until must be an iteration (an integer >= 1), got {until!r}")
     runs = figure_runs(figure, budget)
     states = [_state(Path(root) / r.name, r) for r in runs]
     by_method: dict[tuple[str, str], list[float]] = {}
