@@ -166,24 +166,25 @@ class PlanRow:
         return (self.end - self.progress) * self.seconds_per_unit / 3600.0
 
 
-def saved_rows(path: str | Path) -> list[dict[str, Any]]:
+def saved_rows(path: str | Path, rows: list[dict[str, Any]] | None = None) -> list[dict[str, Any]]:
     """The metrics rows of the run directory ``path`` that a resume keeps: all rows of a
     finished run; of a partial one, the rows its checkpoint counts (``_metrics_lines``,
     :meth:`vslbook.results.RunDir.save_checkpoint`; rows logged after it are dropped on
-    resume); none without a checkpoint."""
+    resume); none without a checkpoint. ``rows``: the run's metrics, where already read."""
     import torch
 
     from vslbook.results import RunDir
 
     rd = RunDir(path)
+    rows = rd.metrics() if rows is None else rows
     if rd.done:
-        return rd.metrics()
+        return rows
     if not rd.checkpoint_path.is_file():
         return []
     # memory-mapped: only the small count is read, not the networks or a replay buffer
     state = torch.load(rd.checkpoint_path, map_location="cpu", weights_only=False, mmap=True)
     lines = int(state.get("_metrics_lines", 0)) if isinstance(state, dict) else 0
-    return rd.metrics()[:lines]
+    return rows[:lines]
 
 
 def unit_seconds(rows: list[dict[str, Any]], run: FigureRun) -> list[float]:
@@ -211,7 +212,8 @@ def _state(path: Path, run: FigureRun) -> tuple[str, int, list[float], str]:
     if not (path / RunDir.CONFIG).is_file():
         return "missing", 0, [], ""
     rd = RunDir(path)
-    rows, saved = rd.metrics(), saved_rows(path)  # progress: where a resume starts
+    rows = rd.metrics()
+    saved = saved_rows(path, rows)  # progress: where a resume starts
     progress = int(saved[-1].get(run.unit, 0) or 0) if saved else 0
     times = unit_seconds(rows, run)
     note = "" if rd.code_matches else "code changed: replayed when resumed or recorded"
