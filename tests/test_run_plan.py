@@ -221,3 +221,24 @@ def test_plan_of_probes_trains_each_run_to_the_iteration_asked(tmp_path, monkeyp
         with pytest.raises(ValueError, match=rf"until must be an iteration \(an integer >= 1\), "
                                              rf"got {re.escape(repr(bad))}"):  # fmt: skip
             plan("fig4-4a", "reduced", tmp_path, until=bad)
+
+
+def test_plan_command_plans_probes(capsys, tmp_path, monkeypatch):
+    """``vslbook plan --until N`` prints what ``plan(until=N)`` plans; a bad N is one error
+    line naming it."""
+    monkeypatch.setenv("VSLBOOK_DATA", str(tmp_path / "data"))
+    first = figure_runs("fig4-4a", "reduced")[0]
+    _partial_run(tmp_path, first, [{"step": i + 1, "iteration_seconds": 3.0}
+                                   for i in range(6)])  # fmt: skip
+    capsys.readouterr()
+    argv = ["plan", "fig4-4a", "--budget", "reduced", "--root", str(tmp_path),
+            "--seeds", str(first.seed), "--methods", first.method]  # fmt: skip
+    assert main([*argv, "--until", "10"]) == 0
+    out = capsys.readouterr().out
+    assert out.strip() == plan_text([r for r in plan("fig4-4a", "reduced", tmp_path, until=10)
+                                     if r.run.name == first.name])  # fmt: skip
+    assert f"{first.name} (6/{first.length} iterations; probe to 10" in out
+    assert out.splitlines()[-1] == "0.0 core-hours left for 1 runs (probes to iteration 10)"
+    assert main([*argv, "--until", "0"]) == 2
+    assert capsys.readouterr().err.strip() == (
+        "vslbook: error: until must be an iteration (an integer >= 1), got 0")

@@ -161,6 +161,9 @@ def _parser() -> argparse.ArgumentParser:
     pl.add_argument("--seeds", type=_seed, nargs="+", default=None)
     pl.add_argument("--methods", nargs="+", default=None, help="legend names, e.g. SVSL")
     pl.add_argument("--envs", nargs="+", default=None, help="environment ids")
+    pl.add_argument("--until", type=int, default=None, metavar="N",
+                    help="plan probes, as `vslbook train --until N` trains them: each run "
+                    "counted in iterations to iteration N (at most its length)")  # fmt: skip
 
     tr = sub.add_parser(
         "train", help="train a figure's runs, one per process (finished ones are reused)",
@@ -325,7 +328,8 @@ def _dispatch(args: argparse.Namespace) -> int:
         from vslbook.experiments.train_figure import select_runs
 
         names = recorded_names(args.figure, args.budget)
-        rows = plan(args.figure, args.budget, args.root, recorded=lambda r: r.name in names)
+        rows = plan(args.figure, args.budget, args.root, recorded=lambda r: r.name in names,
+                    until=args.until)  # fmt: skip
         if (args.seeds, args.methods, args.envs) != (None, None, None):
             keep = {r.name for r in select_runs(args.figure, args.budget, seeds=args.seeds,
                                                 methods=args.methods, envs=args.envs)}
