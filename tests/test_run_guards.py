@@ -283,6 +283,7 @@ def test_editing_run_code_in_experiments_changes_the_code_identity(tmp_path):
     assert edited("erl/svsl.py") != before
     assert edited("experiments/figure_draws.py") == before  # figures only
     assert edited("plots.py") == before
+    assert edited("plot_style.py") == before
     # an algorithm's scope leaves its unreachable code out, run code of experiments/ too
     scoped = package_fingerprint.__wrapped__(package, ("experiments/",))
     path = package / "experiments/svsl_mixtures.py"

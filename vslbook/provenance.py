@@ -70,7 +70,8 @@ def _git_dirty() -> bool | None:
 #: both analysis and run code; the modules of it that runs execute are
 #: :data:`RUN_EXPERIMENTS` and count as run code.
 NOT_RUN_CODE: tuple[str, ...] = (
-    "bounds/", "data.py", "experiments/", "figures.py", "plots.py", "progress.py", "stats.py",
+    "bounds/", "data.py", "experiments/", "figures.py", "plot_style.py", "plots.py",
+    "progress.py", "stats.py",
 )  # fmt: skip
 
 #: The modules of ``experiments/`` that training runs execute: the run loops of Chapters 3
