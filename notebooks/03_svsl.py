@@ -655,7 +655,7 @@ axes[1, 1].set_title("(g) SVSL: ball height, cup at (0, -1.7)")
 fig.suptitle(
     f"Fig. 3.2 beer pong and Fig. A.1 (ours, budget {bp_set.budget}: SVSL N = "
     f"{bp_counts['n_experts']}, K = {bp_counts['iterations_per_expert']}, "
-    f"{count_phrase(len(bp_runs['SVSL']), 'seed')}; thesis: N = 70, K = 750, 20 seeds)\n"
+    f"{bp_set.seeds_phrase()}; thesis: N = 70, K = 750, 20 seeds)\n"
     f"{settings_phrase('beer-pong')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(BP.THESIS_OUTCOME[k] for k in
@@ -762,7 +762,7 @@ axes[3].set_title("(d) SVSL, incoming-ball plane (seed 0)")
 fig.suptitle(
     f"Fig. 3.2 table tennis and Fig. A.2 (ours, budget {tt_set.budget}: SVSL N = "
     f"{tt_counts['n_experts']}, K = {tt_counts['iterations_per_expert']}, "
-    f"{count_phrase(len(tt_runs['SVSL']), 'seed')}; thesis: N = 50, K = 800, 20 seeds)\n"
+    f"{tt_set.seeds_phrase()}; thesis: N = 50, K = 800, 20 seeds)\n"
     f"{settings_phrase('table-tennis-ch3')}", fontsize=10,
 )  # fmt: skip
 fig.text(0.01, 0.0, "\n".join(TT.THESIS_OUTCOME[k] for k in ("curves", "coverage", "entropy")),
