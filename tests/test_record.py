@@ -32,7 +32,7 @@ FILES = ("runs.csv", "evals.csv.gz", "provenance.json", "registry.json")
 PROVENANCE_KEYS = {
     "method", "algo", "env", "seed", "budget", "config", "config_hash", "code_hash",
     "code_hashes_verified", "code_excluded", "git_sha", "git_dirty", "packages", "hostname",
-    "python", "platform", "started", "wall_seconds", "wall_from", "metrics", "recorded",
+    "python", "platform", "cpu", "started", "wall_seconds", "wall_from", "metrics", "recorded",
 }  # fmt: skip
 RESULT_KEYS = {"figure", "method", "task", "budget", "seeds", "probes", "metric", "iqm", "ci_low",
                "ci_high", "stale"}  # fmt: skip

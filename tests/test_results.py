@@ -33,8 +33,10 @@ def test_create_writes_config_and_env(run):
     assert json.loads(text) == CONFIG
     assert list(json.loads(text)) == sorted(CONFIG)
     env = run.env
-    assert {"python", "platform", "hostname", "packages", "git_sha", "timestamp"} <= set(env)
+    assert {"python", "platform", "cpu", "hostname", "packages", "git_sha", "timestamp"} <= set(env)
     assert env["packages"]["numpy"] == np.__version__
+    simd = np.show_config(mode="dicts")["SIMD Extensions"]["found"]  # the CPU NumPy ran on
+    assert env["cpu"] and all(name in env["cpu"] for name in simd)
     assert not run.done
 
 

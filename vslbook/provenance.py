@@ -120,6 +120,26 @@ def package_fingerprint(package: Path, exclude: tuple[str, ...] = ()) -> str:
     return digest.hexdigest()
 
 
+def _cpu() -> str:
+    """The CPU model and the SIMD extensions NumPy found on it, e.g. ``"AMD EPYC (NumPy
+    SIMD: X86_V3, X86_V4, AVX512_ICL)"``: the same code rounds differently on another CPU
+    (:data:`vslbook.replay.RTOL`), so a run's ``env.json`` says which one it ran on."""
+    import numpy as np
+
+    model = platform.processor() or platform.machine()
+    try:
+        with open("/proc/cpuinfo", encoding="utf-8") as f:
+            model = next((line.split(":", 1)[1].strip() for line in f
+                          if line.startswith("model name")), model)  # fmt: skip
+    except OSError:
+        pass
+    try:
+        simd = np.show_config(mode="dicts")["SIMD Extensions"]["found"]
+    except (KeyError, TypeError, ValueError):
+        simd = []
+    return f"{model} (NumPy SIMD: {', '.join(simd)})" if simd else model
+
+
 def environment(code_exclude: tuple[str, ...] = ()) -> dict[str, Any]:
     """What ``env.json`` records: where and with what a run was started."""
     versions: dict[str, str | None] = {}
@@ -131,6 +151,7 @@ def environment(code_exclude: tuple[str, ...] = ()) -> dict[str, Any]:
     return {
         "python": sys.version.split()[0],
         "platform": platform.platform(),
+        "cpu": _cpu(),
         "hostname": socket.gethostname(),
         "packages": versions,
         "git_sha": _git_sha(),

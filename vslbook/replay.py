@@ -30,7 +30,14 @@ __all__ = ["ATOL", "REPLAY_ROWS", "RTOL", "SEED_AXIS_RTOL", "WALL_CLOCK", "numer
 
 #: rows compared (or fewer, when the run has fewer)
 REPLAY_ROWS = 2
-RTOL, ATOL = 1e-9, 1e-12
+#: Tolerances of a float. Not 0: the same code on another machine rounds differently. NumPy's
+#: BLAS picks its kernels by CPU model, and an iterative solver's answer moves with their
+#: rounding: HiREPS's dual ξ on beer pong (``hireps``, seed 0, full), replayed with the code
+#: that made the run on a machine with another CPU, differed by 3e-10 relative in row 1 and
+#: 1.2e-9 in row 2 (its episodes' returns were identical; the difference grows about 300-fold
+#: per iteration, 3e-7 in row 3). A change of a formula, a constant or a precision moves the
+#: first rows by far more than 1e-7.
+RTOL, ATOL = 1e-7, 1e-12
 #: relative tolerance for a run trained on the seed axis (:mod:`vslbook.srl.dime_seeds`):
 #: the replay trains one seed alone, whose batched kernels round differently from the
 #: stacked seeds' (measured: 1.3e-7 relative on an actor loss after a few updates)

@@ -128,7 +128,8 @@ def _write_run(target: Path, entry: dict[str, Any], rows: list[dict[str, Any]],
     target.mkdir(parents=True)
     rd = RunDir(target)
     env = {k: entry.get(k) for k in ("code_hash", "code_hashes_verified", "code_excluded",
-                                      "git_sha", "git_dirty", "packages", "python", "platform")}
+                                      "git_sha", "git_dirty", "packages", "python", "platform",
+                                      "cpu")}
     env |= {"hostname": entry.get("hostname"), "timestamp": entry.get("started"),
             "recorded": recorded}  # fmt: skip
     atomic_write(target / RunDir.CONFIG, json_bytes(entry["config"]))
