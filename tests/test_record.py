@@ -171,6 +171,15 @@ def test_recording_is_deterministic_and_merges(root, capsys, tmp_path):
     assert mine["value"].iloc[-1] == 123.25
     assert set(pd.read_csv(directory / "runs.csv")["run"]) == {r.name for r in runs}
 
+    # a run made before env.json named the CPU is recorded without one (not "cpu": null)
+    env = json.loads((root / keep.name / "env.json").read_text())
+    assert env["cpu"] == json.loads(
+        (directory / "provenance.json").read_text())["runs"][keep.name]["cpu"]
+    del env["cpu"]
+    (root / keep.name / "env.json").write_text(json.dumps(env))
+    _record(root, capsys)
+    assert "cpu" not in json.loads((directory / "provenance.json").read_text())["runs"][keep.name]
+
     # an empty root writes nothing
     (tmp_path / "empty").mkdir()
     monkey = tmp_path / "other-data"

@@ -306,10 +306,12 @@ def _provenance(rd: RunDir, run: Any, earlier: dict[str, Any] | None) -> dict[st
         "code_excluded": env.get("code_excluded", []), "git_sha": env.get("git_sha"),
         "git_dirty": env.get("git_dirty"), "packages": env.get("packages"),
         "hostname": env.get("hostname"), "python": env.get("python"),
-        "platform": env.get("platform"), "cpu": env.get("cpu"), "started": env.get("timestamp"),
+        "platform": env.get("platform"), "started": env.get("timestamp"),
         "wall_seconds": None if math.isnan(wall) else wall, "wall_from": wall_from,
         "metrics": done.get("metrics"),
     }  # fmt: skip
+    if env.get("cpu") is not None:  # runs made before env.json named the CPU have no entry
+        entry["cpu"] = env["cpu"]
     same = earlier is not None and all(earlier.get(k) == entry[k] for k in entry)
     now = datetime.now(UTC).isoformat(timespec="seconds")
     entry["recorded"] = earlier["recorded"] if same else now
