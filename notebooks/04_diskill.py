@@ -1198,20 +1198,20 @@ plt.show()
 # them with 20 linear experts (Table B.1); a context its Gaussian $\pi(c\mid o)$ proposes
 # outside the valid region gets $R_c(c) = -20\,d_c^2$ (B.4.1.1) and is not executed.
 #
-# **The thesis's outcome** (at least 4 seeds): BBRL and Di-SkilL reach high success
-# rates, BBRL slightly better; V2 converges to a much lower success rate and V3 needs more
+# **The thesis's outcome** (at least 4 seeds): BBRL and Di-SkilL reach high success rates,
+# BBRL slightly better; V2 converges to a much lower success rate and V3 needs more
 # samples to reach Di-SkilL. SVSL does worse and needs more samples to reach about 80 %
 # success. **Ours**: the runs recorded at the largest budget (the caption under the figure
 # says how many seeds each method has; a probe, a run recorded while still training, is
 # drawn faded with how far it got, and is not compared). At the thesis's budget (4500
-# iterations, seed 0 recorded) both methods succeed: Di-SkilL's first test successes come
-# before BBRL's, BBRL then rises faster and ends higher, as in the thesis (the figure
-# below; the final rates are printed under it). The variants without the curriculum and SVSL train to a share of their budget
-# (900 of 4500 iterations; SVSL 4020 of its 20,100), printed in the legend. An earlier
-# probe of Di-SkilL (600 iterations, made outside the book before the full-budget runs,
-# recorded in `data/measurements/` and printed below) saw the same start: the ball is hit
-# only after a few hundred iterations. At `VSLBOOK_BUDGET=reduced` (2 % of the iterations)
-# the success panel stays at 0.
+# iterations, seeds 0 and 1 recorded) both methods succeed; BBRL rises faster and ends
+# higher, as in the thesis (the figure below; the final rates are printed under it). The
+# variants without the curriculum and SVSL train to a share of their budget (900 of 4500
+# iterations; SVSL 4020 of its 20,100), printed in the legend. An earlier probe of
+# Di-SkilL (600 iterations, made outside the book before the full-budget runs, recorded in
+# `data/measurements/` and printed below) saw the same start: the ball is hit only after a
+# few hundred iterations. At `VSLBOOK_BUDGET=reduced` (2 % of the iterations) the success
+# panel stays at 0.
 
 # %% tags=["full-width"]
 t0 = time.perf_counter()
