@@ -264,6 +264,9 @@ def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
     assert fs.probe_progress() == {"diskill-v2": "900/4500 iterations, 450/4500 iterations"}
     caption = fs.caption()
     assert "seeds diskill 1 of 24, bbrl 1 of 24, diskill-v2 0 of 24 and 2 probes" in caption
+    # Fig. 4.3b's thesis reports "at least 4 seeds", not the full budget's 24
+    assert "(of the full budget's; the thesis's had at least 4)" in caption
+    assert "(of the thesis's, the full budget's)" in replace(fs, figure="fig4-3c").caption()
     assert ("probes, still training: v0 s0 at 900/4500 iterations, v1 s1 at 450/4500 "
             "iterations") in caption
     # a pair with a probe in it is not compared; a pair of finished runs is
