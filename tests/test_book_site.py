@@ -22,19 +22,17 @@ import functools
 import http.server
 import os
 import shutil
-import subprocess
-import sys
 import threading
 from pathlib import Path
 
 import pytest
+import site_build
 import site_layout as layout
 
-from vslbook.plots import figures_dir
 from vslbook.progress import frozen_bars
 
 ROOT = Path(__file__).resolve().parents[1]
-SITE = ROOT / "build" / "site-smoke"
+SITE = site_build.SITE
 SHOTS = ROOT / "build" / "screenshots"
 CHROMIUM = os.environ.get("VSLBOOK_CHROMIUM", "/usr/bin/chromium")
 # The flags the site's browser runs with (fresh profile: Playwright makes one per launch).
@@ -65,13 +63,16 @@ _ANCHORS = """() => Array.from(document.querySelectorAll('[id^="eq-"]')).map(e =
 
 @pytest.fixture(scope="module")
 def site() -> Path:
-    """Build the smoke site (notebooks executed, cached by content) and return its folder."""
+    """The smoke site (notebooks executed, cached by content): the build that ``make test``
+    started beside pytest (:mod:`site_build`), or one made now; return its folder."""
     if not Path(CHROMIUM).is_file():
         pytest.fail(f"no Chromium at {CHROMIUM}: `make setup` installs Debian's chromium "
                     "(or set VSLBOOK_CHROMIUM)")
-    env = {**os.environ, "VSLBOOK_BUDGET": "smoke"}
-    subprocess.run([sys.executable, str(ROOT / "book" / "build.py"), "--budget", "smoke", "-q"],
-                   check=True, cwd=ROOT, env=env)
+    status = os.environ.get(site_build.STATUS_ENV)
+    if status:
+        site_build.wait_for(Path(status))
+    else:
+        site_build.build_now()
     assert (SITE / "index.html").is_file()
     return SITE
 
@@ -164,11 +165,11 @@ def test_output_images_fill_the_column_up_to_their_size(rendered: dict[str, dict
 
 
 def test_figures_have_wide_enough_panels(rendered: dict[str, dict]):
-    layouts = layout.load_layouts(figures_dir(), "smoke")
+    layouts = layout.load_layouts(site_build.FIGURES, "smoke")
     # written while the notebooks execute: a cached build writes none
-    assert layouts, (f"no figure layouts (*.layout.json) of the smoke budget in {figures_dir()}"
-                     ": the cached notebooks ran with another $VSLBOOK_FIGURES, or before "
-                     "save_figure wrote layouts; empty build/book-cache/smoke and run again")
+    assert layouts, (f"no figure layouts (*.layout.json) of the smoke budget in "
+                     f"{site_build.FIGURES}: the cached notebooks ran before save_figure "
+                     "wrote layouts there; empty build/book-cache/smoke and run again")
     shown = [(name, img) for name, page in rendered.items() for img in page["images"]]
     problems = layout.figure_problems(layouts, shown)
     assert not problems, "\n".join(problems)
