@@ -1180,12 +1180,13 @@ succ = [f for f in FIGS_4 if DR.METRIC[f] != "test_return"]
 fig, axes = panel_grid(2 * len(succ), panel=(5.5, 3.8))
 for figure, ax_ret, ax_share in zip(succ, axes[::2], axes[1::2], strict=True):
     draw_executed(ax_ret, ax_share, fig_runs[figure], reps=budget.bootstrap_reps)
-    probe = " (probes)" if sets[figure].probes else ""
     for ax in (ax_ret, ax_share):
         sets[figure].mark_probes(ax, DR.LABELS)  # as in the figure above: faded, "(probe, …)"
-    ax_ret.set_title(f"{DR.FIGURES[figure][0]}: executed return (Fig. {figure}'s runs{probe})",
-                     fontsize=10)  # fmt: skip
-    ax_share.set_title(f"{DR.FIGURES[figure][0]}: share executed{probe}", fontsize=10)
+    probes = bool(sets[figure].probes)
+    ax_ret.set_title(f"{DR.FIGURES[figure][0]}: executed return (Fig. {figure}'s runs"
+                     f"{', probes' if probes else ''})", fontsize=10)  # fmt: skip
+    ax_share.set_title(f"{DR.FIGURES[figure][0]}: share executed{' (probes)' if probes else ''}",
+                       fontsize=10)  # fmt: skip
 fig.tight_layout()
 annotate(fig, *(sets[f] for f in succ))  # where the runs came from, under the figure
 save_figure(fig, "fig-4-4-executed")
