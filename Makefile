@@ -36,8 +36,9 @@ RETRAIN ?=
 export MPLBACKEND ?= Agg
 export MUJOCO_GL ?= disable
 export PYTHONHASHSEED := 0
-# stable-baselines3 makes a fresh folder tempdir/SB3-<time> for each PPO run's logger (it
-# writes nothing there); one folder under build/ keeps /tmp clean.
+# stable-baselines3 makes a fresh folder tempdir/SB3-<time> whenever PPO.learn runs without
+# a logger set (the library sets one; a few tests call learn directly); one folder under
+# build/ keeps /tmp clean.
 export SB3_LOGDIR ?= $(CURDIR)/build/sb3-logs
 
 .PHONY: setup myo book site test test-fast notebooks lab lint clean help browser gl

@@ -126,6 +126,17 @@ def test_same_seed_same_metrics(uninterrupted: list[dict]) -> None:
     assert other[1]["eval_return"] != uninterrupted[1]["eval_return"]
 
 
+def test_training_makes_no_logger_folder(tmp_path, monkeypatch) -> None:
+    """SB3 gives a model without a logger of its own an empty folder SB3-<time> (under
+    ``SB3_LOGDIR``, else the temp dir) on every ``learn``; the training loop sets one that
+    writes nowhere, and still copies the update statistics into the metrics."""
+    monkeypatch.setenv("SB3_LOGDIR", str(tmp_path / "sb3"))
+    one_update = PPOConfig(n_rollout_steps=512, n_envs=2, n_epochs=2, total_steps=512)
+    rows = train_ppo("3.9", one_update, seed=4, **TINY_RUN)
+    assert not (tmp_path / "sb3").exists()
+    assert "approx_kl" in rows[1]
+
+
 @pytest.mark.parametrize("stop_after_evals", [1, 2])
 def test_resume_gives_the_uninterrupted_metrics(
     tmp_path, uninterrupted: list[dict], stop_after_evals: int

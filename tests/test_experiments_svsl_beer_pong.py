@@ -103,6 +103,23 @@ def test_curve_frame_interpolates_each_run_inside_its_range(tmp_path):
     assert (curves["n_runs"] == 1).all() and len(curves) == 16
 
 
+def test_curve_frame_ends_each_run_at_its_final_test(tmp_path):
+    """A run ending between two grid counts is drawn up to its own last test, not to the
+    grid count before it: its final point is its final recorded value."""
+    runs = {}
+    for method, x_end in {"SVSL": 100.0, "HiREPS": 65.0}.items():
+        rd = RunDir.create(tmp_path, {"algo": method, "env": "t", "seed": 0})
+        for step, x in enumerate(np.linspace(10, x_end, 4), start=1):
+            rd.log(step, samples=float(x), test_return=float(step % 2))  # zigzag: 1, 0, 1, 0
+        runs[method] = [rd.path]
+    frame = B.curve_frame(runs, points=10)  # grid 10, 20, ..., 100, plus 65
+    hi = frame[frame["method"] == "HiREPS"]
+    assert hi["samples"].iloc[-1] == 65.0 and hi["test_return"].iloc[-1] == 0.0
+    svsl = frame[frame["method"] == "SVSL"]
+    assert 65.0 in set(svsl["samples"])  # the other runs are read at that count too
+    assert svsl["samples"].iloc[-1] == 100.0 and svsl["test_return"].iloc[-1] == 0.0
+
+
 def test_grid_contexts_are_cell_centres():
     g = B.grid_contexts((2, 2))  # box [-0.32, 0.32] x [-2.2, -1.2]
     assert g.shape == (2, 2, 2)

@@ -31,6 +31,7 @@ import mujoco
 import numpy as np
 import torch
 from stable_baselines3 import PPO
+from stable_baselines3.common.logger import Logger
 from stable_baselines3.common.vec_env import DummyVecEnv, VecNormalize
 
 from vslbook.progress import progress_bar
@@ -379,6 +380,9 @@ def train_with_checkpoints(
         clock = time.perf_counter()
         # N steps from the n_envs environments, then n_epochs of minibatch-K updates
         # (clipped surrogate, GAE(λ)), chunk / N times; episodes continue across calls
+        # a fresh logger per call, as SB3 makes itself, but one that writes nowhere: SB3's
+        # own makes an empty folder tempdir/SB3-<time> on every call
+        model.set_logger(Logger(folder=None, output_formats=[]))
         model.learn(chunk, callback=callback, reset_num_timesteps=False, log_interval=None)
         elapsed = max(time.perf_counter() - clock, 1e-9)
         steps = model.num_timesteps

@@ -260,7 +260,9 @@ def curve_frame(
     """Long frame (method, run, samples, ``y``) with every run on one grid of episode counts.
 
     Each run's test rows (``y`` against executed episodes ``samples``) are linearly
-    interpolated onto ``points`` counts spanning all runs; a run contributes only inside
+    interpolated onto ``points`` counts spanning all runs, and onto each run's last count,
+    so that every run's curve ends at its final test (a run ending between two grid counts
+    would otherwise be drawn up to the count before its end); a run contributes only inside
     its own range (no extrapolation). ``methods``: the names ``runs`` may use.
     """
     if not runs:
@@ -278,7 +280,8 @@ def curve_frame(
             tables.append((method, j, df["samples"].to_numpy(float), df[y].to_numpy(float)))
     lo = min(x[0] for *_, x, _ in tables if len(x))
     hi = max(x[-1] for *_, x, _ in tables if len(x))
-    grid = np.unique(np.linspace(lo, hi, points).round())
+    ends = [x[-1] for *_, x, _ in tables if len(x)]
+    grid = np.unique(np.concatenate([np.linspace(lo, hi, points).round(), ends]))
     rows = []
     for method, j, x, v in tables:
         inside = grid[(grid >= x[0]) & (grid <= x[-1])] if len(x) else grid[:0]
