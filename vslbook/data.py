@@ -37,6 +37,7 @@ __all__ = [
     "paper_tasks",
     "register_file",
     "results_dir",
+    "unregister_file",
     "verify_file",
 ]
 
@@ -112,6 +113,23 @@ def register_file(path: str | os.PathLike[str], description: str) -> dict[str, A
     registry[path.name] = entry
     atomic_write(path.parent / REGISTRY, json_bytes(registry))
     return entry
+
+
+def unregister_file(path: str | os.PathLike[str]) -> bool:
+    """Drop ``path``'s entry from its folder's registry.json (the file itself is left as
+    it is); False where it had none. A registry left empty is removed."""
+    path = Path(path)
+    registry_path = path.parent / REGISTRY
+    if not registry_path.exists():
+        return False
+    registry = _read_registry(path.parent)
+    if registry.pop(path.name, None) is None:
+        return False
+    if registry:
+        atomic_write(registry_path, json_bytes(registry))
+    else:
+        registry_path.unlink()
+    return True
 
 
 def _verified_bytes(path: Path) -> bytes:
