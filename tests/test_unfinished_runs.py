@@ -1,6 +1,6 @@
-"""`vslbook pack` / `vslbook unpack`: an unfinished run carried to a fresh root resumes
-exactly, finished runs drop out, a run being trained is never packed, bad archives and bad
-roots are errors that name them."""
+"""`python -m vslbook.experiments.unfinished_runs pack / unpack`: an unfinished run carried
+to a fresh root resumes exactly, finished runs drop out, a run being trained is never packed,
+bad archives and bad roots are errors that name them."""
 
 from __future__ import annotations
 
@@ -10,9 +10,8 @@ import tarfile
 
 import pytest
 
-from vslbook.cli import main
 from vslbook.data import DataIntegrityError, gzip_bytes, register_file
-from vslbook.experiments.unfinished_runs import archive_bytes, pack, unpack
+from vslbook.experiments.unfinished_runs import archive_bytes, main, pack, unpack
 from vslbook.run_lock import RunLock
 from vslbook.training import run
 
@@ -128,6 +127,9 @@ def test_command_line(tmp_path, capsys, monkeypatch):
     assert (tmp_path / "data" / "unfinished" / f"{part.path.name}.tar.gz").is_file()
     assert main(["unpack", "--root", str(tmp_path / "c")]) == 0
     assert f"unpacked  {part.path.name}  (checkpoint at 7)" in capsys.readouterr().out
+    (tmp_path / "empty").mkdir()
+    assert main(["pack", "--root", str(tmp_path / "empty")]) == 0
+    assert capsys.readouterr().out == "nothing to pack\n"
     assert main(["pack", "--root", str(tmp_path / "nowhere")]) == 2
     err = capsys.readouterr().err
     assert "nowhere' does not exist; expected a folder of run directories" in err

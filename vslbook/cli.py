@@ -13,8 +13,6 @@
     vslbook train FIGURE [--budget B] [--seeds ..] [--jobs N]  a figure's runs, N at once
     vslbook record FIGURE [--budget B] [--root DIR] a figure's finished runs into data/results/
     vslbook results [--json] [--verify]      recorded run sets: final IQM, 95 % CI, stale
-    vslbook pack [--root DIR]                unfinished runs into data/unfinished/ (carry them)
-    vslbook unpack [--root DIR]              data/unfinished/'s runs back into DIR (resume)
 """
 
 from __future__ import annotations
@@ -210,21 +208,6 @@ def _parser() -> argparse.ArgumentParser:
                      help="replay the first rows of every recorded run whose code has changed "
                      "and compare them with the record: equal rows keep it current")  # fmt: skip
 
-    pk = sub.add_parser(
-        "pack", help="archive ROOT's unfinished runs into data/unfinished/ (to carry them)",
-        description="Write every unfinished run of ROOT that has a checkpoint to "
-        "data/unfinished/<run>.tar.gz (taken under the run's lock; a run being trained is "
-        "skipped) and remove the archives of runs that have finished there.",
-    )  # fmt: skip
-    pk.add_argument("--root", default="runs", help="folder of run directories")
-    up = sub.add_parser(
-        "unpack", help="write data/unfinished/'s runs back into ROOT to resume them",
-        description="Unpack each archive of data/unfinished/ into ROOT where ROOT lacks the "
-        "run or holds it at an earlier checkpoint (that copy moves to ROOT/_replaced/); "
-        "training it again resumes exactly.",
-    )  # fmt: skip
-    up.add_argument("--root", default="runs", help="folder of run directories")
-
     f = sub.add_parser("figure", help="reproduce a registered figure")
     f.add_argument("id")
     f.add_argument("--budget", default=None)
@@ -383,13 +366,6 @@ def _dispatch(args: argparse.Namespace) -> int:
                 print(json.dumps(row))
         else:
             print(results_text(rows))
-        return 0
-    if args.command in ("pack", "unpack"):
-        from vslbook.experiments import unfinished_runs
-
-        carried = getattr(unfinished_runs, args.command)(args.root)
-        if not carried:
-            print(f"nothing to {args.command}")
         return 0
     if args.command == "figure":
         fig = get_figure(args.id)

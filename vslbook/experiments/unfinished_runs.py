@@ -1,16 +1,17 @@
-"""Unfinished runs carried between machines: ``vslbook pack`` and ``vslbook unpack``.
+"""Unfinished runs carried between machines: ``python -m vslbook.experiments.unfinished_runs
+pack|unpack --root DIR``.
 
 A full-budget run set trains for days, a few hours at a time, and the machine that trains
 it need not keep its runs folder from one sitting to the next. The repository does keep
 what is committed, so an unfinished run travels with it:
 
-* :func:`pack` (``vslbook pack --root DIR``) writes every unfinished run of ``DIR`` that
+* :func:`pack` (``... pack --root DIR``) writes every unfinished run of ``DIR`` that
   has a checkpoint (no ``DONE``, no ``FAILED``) to ``data/unfinished/<run>.tar.gz``: its
   ``config.json``, ``env.json``, ``metrics.jsonl`` and ``checkpoint/``, taken under the
   run's lock (:mod:`vslbook.run_lock`), so a run being trained is skipped, never packed
   half-written. Each archive is registered (sha256) in ``data/unfinished/registry.json``;
   the archive of a run that has since finished in ``DIR`` (or failed) is removed.
-* :func:`unpack` (``vslbook unpack --root DIR``) writes each archive back as a run
+* :func:`unpack` (``... unpack --root DIR``) writes each archive back as a run
   directory of ``DIR`` where ``DIR`` has no such run, or has it at an earlier checkpoint
   (that copy is moved to ``DIR/_replaced/``, nothing is deleted). Training it again
   (``vslbook run`` / ``vslbook train``) resumes exactly, as on the machine that packed it:
@@ -19,13 +20,19 @@ what is committed, so an unfinished run travels with it:
 
 An archive's bytes depend on the run's files alone (sorted members, fixed times, owners and
 gzip header), so packing an unchanged run again changes nothing in the repository.
+
+The commands live here, not in ``vslbook.cli``, because the command line is part of the
+code fingerprint a recorded run carries (:mod:`vslbook.provenance`): adding them there would
+mark every recorded set for a replay, for a change that moves no number.
 """
 
 from __future__ import annotations
 
+import argparse
 import io
 import os
 import shutil
+import sys
 import tarfile
 import tempfile
 import time
@@ -37,7 +44,8 @@ from vslbook.jsonfiles import atomic_write
 from vslbook.results import RunDir
 from vslbook.run_lock import RunLock, RunLockedError
 
-__all__ = ["ARCHIVE_SUFFIX", "Carried", "archive_bytes", "pack", "unfinished_dir", "unpack"]
+__all__ = ["ARCHIVE_SUFFIX", "Carried", "archive_bytes", "main", "pack", "unfinished_dir",
+           "unpack"]  # fmt: skip
 
 #: the file name of a run's archive is ``<run><ARCHIVE_SUFFIX>``
 ARCHIVE_SUFFIX = ".tar.gz"
@@ -202,3 +210,29 @@ def unpack(root: str | os.PathLike[str], source: str | os.PathLike[str] | None =
     for item in done:
         report(str(item))
     return done
+
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m vslbook.experiments.unfinished_runs pack|unpack [--root DIR]``; bad input
+    ends in one line ``unfinished_runs: error: ...`` and exit status 2."""
+    parser = argparse.ArgumentParser(
+        prog="python -m vslbook.experiments.unfinished_runs",
+        description="pack: archive ROOT's unfinished runs into data/unfinished/; unpack: "
+        "write them back into ROOT (where it lacks them or holds them at an earlier "
+        "checkpoint), to resume them exactly.",
+    )  # fmt: skip
+    parser.add_argument("command", choices=["pack", "unpack"])
+    parser.add_argument("--root", default="runs", help="folder of run directories")
+    args = parser.parse_args(argv)
+    try:
+        carried = (pack if args.command == "pack" else unpack)(args.root)
+    except (ValueError, OSError) as err:
+        print(f"unfinished_runs: error: {err}", file=sys.stderr)
+        return 2
+    if not carried:
+        print(f"nothing to {args.command}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
