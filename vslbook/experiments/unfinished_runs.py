@@ -52,7 +52,8 @@ ARCHIVE_SUFFIX = ".tar.gz"
 #: the files of a run directory an archive holds (plus everything under ``checkpoint/``)
 _RUN_FILES = (RunDir.CONFIG, RunDir.ENV, RunDir.METRICS)
 _DESCRIPTION = ("an unfinished run's directory (config.json, env.json, metrics.jsonl, "
-                "checkpoint/), tar + gzip; written by vslbook pack, read by vslbook unpack")
+                "checkpoint/), tar + gzip; written by `python -m "
+                "vslbook.experiments.unfinished_runs pack`, read by its `unpack`")
 
 
 @dataclass(frozen=True)
