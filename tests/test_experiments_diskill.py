@@ -174,9 +174,12 @@ def test_skills_at_a_context(reacher_runs):
     assert sorted(r["expert"] for r in rows) == [0, 1]
     assert rows[0]["gating"] >= rows[1]["gating"]
     assert abs(sum(r["gating"] for r in rows) - 1) < 1e-9
-    np.testing.assert_array_equal(
-        rows[0]["theta"], model.mean_parameters(c[None], np.array([rows[0]["expert"]]))[0]
-    )
+    # the chosen expert's mean at c, computed alone; float32, and a batch of one expert
+    # takes other kernels than all experts at once (up to 2e-6 relative on an Intel Xeon)
+    alone = model.mean_parameters(c[None], np.array([rows[0]["expert"]]))[0]
+    np.testing.assert_allclose(rows[0]["theta"], alone, rtol=1e-5, atol=1e-7)
+    other = model.mean_parameters(c[None], np.array([rows[1]["expert"]]))[0]
+    assert np.abs(other - alone).max() > 1e-3  # the tolerance tells the experts apart
     assert SK.skills(model, c, min_gating=0.99) == []
     fig, ax = plt.subplots()
     with pytest.raises(ValueError, match="not 'ball'"):
