@@ -14,9 +14,11 @@ what is committed, so an unfinished run travels with it:
 * :func:`unpack` (``... unpack --root DIR``) writes each archive back as a run
   directory of ``DIR`` where ``DIR`` has no such run, or has it at an earlier checkpoint
   (that copy is moved to ``DIR/_replaced/``, nothing is deleted). Training it again
-  (``vslbook run`` / ``vslbook train``) resumes exactly, as on the machine that packed it:
-  the files are the same bytes, and resuming rewinds the rows logged after the checkpoint
-  (:func:`vslbook.run_open.open_run`).
+  (``vslbook run`` / ``vslbook train``) resumes from the state it was packed in: the files
+  are the same bytes, and resuming rewinds the rows logged after the checkpoint
+  (:func:`vslbook.run_open.open_run`). On a machine that rounds like the one that packed
+  it, the rows are those of an uninterrupted run; on another CPU its float32 network
+  updates round differently from the checkpoint on (:mod:`vslbook.experiments.record_verify`).
 
 An archive's bytes depend on the run's files alone (sorted members, fixed times, owners and
 gzip header), so packing an unchanged run again changes nothing in the repository.
