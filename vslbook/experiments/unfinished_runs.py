@@ -195,9 +195,10 @@ def unpack(root: str | os.PathLike[str], source: str | os.PathLike[str] | None =
             here = root / name
             if (here / RunDir.CONFIG).is_file():
                 mine = RunDir(here)
-                if mine.done or mine.failed or _checkpoint_step(here) >= theirs:
-                    state = "done" if mine.done else "failed" if mine.failed else \
-                        f"checkpoint at {_checkpoint_step(here)}"
+                ours = _checkpoint_step(here)
+                if mine.done or mine.failed or ours >= theirs:
+                    state = ("done" if mine.done else "failed" if mine.failed
+                             else f"checkpoint at {ours}")  # fmt: skip
                     done.append(Carried(name, "kept", f"{state} here; archive at {theirs}"))
                     continue
                 try:
