@@ -42,6 +42,11 @@ CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--no-first-run"
 
 pytestmark = pytest.mark.slow
 
+#: how long a page may take to load, typeset and go quiet on the network (and any other
+#: browser step): generous, because a busy two-core machine is slow to render; a page that
+#: never settles (a request left open) still fails, by name
+PAGE_TIMEOUT_MS = 180_000
+
 # Text left in the page after MathJax ran, with code, program output and the typeset math
 # removed: any raw TeX still in it was not typeset.
 _PROSE = """() => {
@@ -149,7 +154,7 @@ def rendered(site: Path, server: str, browser) -> dict[str, dict]:
     if SHOTS.exists():
         shutil.rmtree(SHOTS)
     SHOTS.mkdir(parents=True)
-    return {name: _check_page(browser, f"{server}/{name}", name, server)
+    return {name: _open_page(browser, f"{server}/{name}", name, server)
             for name in _pages(site)}
 
 
@@ -181,8 +186,31 @@ def test_displayed_equations_fit_or_scroll(rendered: dict[str, dict]):
     assert not problems, "\n".join(problems)
 
 
-def _check_page(browser, url: str, name: str, server: str) -> dict:
+def _open_page(browser, url: str, name: str, server: str) -> dict:
+    """:func:`_check_page`, with a page that does not settle in :data:`PAGE_TIMEOUT_MS`
+    reported as that page's problem (naming the requests still open) instead of an error
+    that hides every other page's checks."""
+    from playwright.sync_api import Error as PlaywrightError
+
     page = browser.new_page(viewport=layout.VIEWPORT)
+    page.set_default_timeout(PAGE_TIMEOUT_MS)
+    page.set_default_navigation_timeout(PAGE_TIMEOUT_MS)
+    open_requests: list = []
+    page.on("request", lambda r: open_requests.append(r))
+    for done in ("requestfinished", "requestfailed"):
+        page.on(done, lambda r: open_requests.remove(r) if r in open_requests else None)
+    try:
+        return _check_page(page, url, name, server)
+    except PlaywrightError as e:
+        still = [r.url for r in open_requests]
+        message = str(e).splitlines()[0].rstrip(".")
+        return {"problems": [f"{name}: {message}; requests still open: {still[:10]}"],
+                "images": [], "equations": []}
+    finally:
+        page.close()
+
+
+def _check_page(page, url: str, name: str, server: str) -> dict:
     errors: list[str] = []
     outside: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
@@ -233,7 +261,6 @@ def _check_page(browser, url: str, name: str, server: str) -> dict:
     if figure.count():
         figure.first.scroll_into_view_if_needed()
         page.screenshot(path=str(SHOTS / f"{stem}-figure.png"))
-    page.close()
     return measured
 
 
@@ -254,3 +281,39 @@ def _opening_problems(name: str, opening: dict | None) -> list[str]:
         problems.append(f"{name}: the claims of a smoke build must read 'smoke' (code path "
                         f"only), not a verdict; got statuses {opening['statuses']}")
     return problems
+
+
+class _StallingHandler(http.server.BaseHTTPRequestHandler):
+    """A page whose image never arrives within the test's timeout."""
+
+    def do_GET(self) -> None:  # noqa: N802 (the http.server name)
+        if self.path.endswith(".png"):
+            threading.Event().wait(5.0)
+            self.send_error(404)
+            return
+        body = b"<html><body><p>text</p><img src='/stalls.png'></body></html>"
+        self.send_response(200)
+        self.send_header("Content-Type", "text/html")
+        self.send_header("Content-Length", str(len(body)))
+        self.end_headers()
+        self.wfile.write(body)
+
+    def log_message(self, *args) -> None:
+        pass
+
+
+def test_a_page_that_never_settles_is_its_own_named_problem(browser, monkeypatch):
+    """A stalled request fails that page by name (and the request), not the whole run."""
+    monkeypatch.setattr(f"{__name__}.PAGE_TIMEOUT_MS", 1000)
+    httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _StallingHandler)
+    httpd.daemon_threads = True
+    threading.Thread(target=httpd.serve_forever, daemon=True).start()
+    server = f"http://127.0.0.1:{httpd.server_address[1]}"
+    try:
+        got = _open_page(browser, f"{server}/stalls.html", "stalls.html", server)
+    finally:
+        httpd.shutdown()
+    assert len(got["problems"]) == 1, got["problems"]
+    problem = got["problems"][0]
+    assert problem.startswith("stalls.html: ") and "stalls.png" in problem, problem
+    assert got["images"] == [] and got["equations"] == []
