@@ -112,12 +112,14 @@ site: book
 # The smoke site for the browser test builds in the background beside pytest (the
 # machine's second core; tests/site_build.py), its output in build/site-smoke.log; the
 # browser test waits for it. pytest exits 5 when nothing is collected; that is not a
-# failure of the suite.
+# failure of the suite. pytest runs one thread per process unless $OMP_NUM_THREADS says
+# otherwise: the build has the other core, and two threads each on two cores only contend.
 SITE_STATUS := $(CURDIR)/build/site-smoke.status
 test: notebooks $(MATHJAX) gl browser slurm
 	mkdir -p build && rm -f $(SITE_STATUS)
 	$(BIN)/python tests/site_build.py $(SITE_STATUS) & \
-	VSLBOOK_SITE_BUILD=$(SITE_STATUS) VSLBOOK_BUDGET=smoke \
+	OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} \
+	  VSLBOOK_SITE_BUILD=$(SITE_STATUS) VSLBOOK_BUDGET=smoke \
 	  VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
 	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
 	  rc=$$?; wait; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc
