@@ -23,6 +23,7 @@ import http.server
 import os
 import shutil
 import threading
+import time
 from pathlib import Path
 
 import pytest
@@ -46,6 +47,8 @@ pytestmark = pytest.mark.slow
 #: browser step): generous, because a busy two-core machine is slow to render; a page that
 #: never settles (a request left open) still fails, by name
 PAGE_TIMEOUT_MS = 180_000
+#: how long a settled page has no request open (:func:`_settle`)
+QUIET_S = 0.5
 
 # Text left in the page after MathJax ran, with code, program output and the typeset math
 # removed: any raw TeX still in it was not typeset.
@@ -55,6 +58,7 @@ _PROSE = """() => {
       .forEach(e => e.remove());
   return body.innerText;
 }"""
+_IMAGES_COMPLETE = "() => Array.from(document.images).every(i => i.complete)"
 _IMAGES = """() => Array.from(document.images).map(i => ({src: i.currentSrc || i.src,
   ok: i.complete && i.naturalWidth > 0}))"""
 # The text of the notebooks' outputs, as a reader sees it.
@@ -200,8 +204,8 @@ def _open_page(browser, url: str, name: str, server: str) -> dict:
     for done in ("requestfinished", "requestfailed"):
         page.on(done, lambda r: open_requests.remove(r) if r in open_requests else None)
     try:
-        return _check_page(page, url, name, server)
-    except PlaywrightError as e:
+        return _check_page(page, url, name, server, open_requests)
+    except (PlaywrightError, _Unsettled) as e:
         still = [r.url for r in open_requests]
         message = str(e).splitlines()[0].rstrip(".")
         return {"problems": [f"{name}: {message}; requests still open: {still[:10]}"],
@@ -210,7 +214,39 @@ def _open_page(browser, url: str, name: str, server: str) -> dict:
         page.close()
 
 
-def _check_page(page, url: str, name: str, server: str) -> dict:
+class _Unsettled(Exception):
+    """A page still busy (typesetting, fonts, images or requests) after its timeout."""
+
+
+def _settle(page, open_requests: list, timeout_ms: float) -> None:
+    """Wait until a loaded page is done: MathJax has typeset (where the page has it), its
+    fonts have loaded, every image is complete, and no request has been open for
+    :data:`QUIET_S`. The open requests are this test's own account (``open_requests``):
+    Playwright's ``networkidle``, re-armed by the fonts MathJax fetches once it typesets,
+    once never came back on a slow machine although no request was open."""
+    deadline = time.monotonic() + timeout_ms / 1000
+    typeset = page.evaluate("""async (ms) => {
+      const busy = Promise.all([
+        typeof MathJax === 'undefined' ? null : MathJax.startup.promise,
+        document.fonts.ready]);
+      return await Promise.race([busy.then(() => true),
+                                 new Promise(r => setTimeout(() => r(false), ms))]);
+    }""", timeout_ms)
+    if not typeset:
+        raise _Unsettled(f"MathJax or the fonts still busy after {timeout_ms:.0f} ms")
+    quiet_since = None
+    while True:
+        now = time.monotonic()
+        done = not open_requests and page.evaluate(_IMAGES_COMPLETE)
+        quiet_since = (quiet_since or now) if done else None
+        if quiet_since is not None and now - quiet_since >= QUIET_S:
+            return
+        if now > deadline:
+            raise _Unsettled(f"still loading after {timeout_ms:.0f} ms")
+        page.wait_for_timeout(50)
+
+
+def _check_page(page, url: str, name: str, server: str, open_requests: list) -> dict:
     errors: list[str] = []
     outside: list[str] = []
     page.on("console", lambda m: errors.append(m.text) if m.type == "error" else None)
@@ -224,11 +260,9 @@ def _check_page(page, url: str, name: str, server: str) -> dict:
             r.abort()
 
     page.route("**/*", route)
-    page.goto(url, wait_until="networkidle")
+    page.goto(url, wait_until="load")
+    _settle(page, open_requests, PAGE_TIMEOUT_MS)
     has_mathjax = page.evaluate("() => typeof MathJax !== 'undefined'")
-    if has_mathjax:
-        page.evaluate("() => MathJax.startup.promise")
-        page.wait_for_load_state("networkidle")
     stem = Path(name).stem
     problems = [f"{name}: console error: {e}" for e in errors]
     problems += [f"{name}: fetched from outside the site: {u}" for u in outside]
@@ -289,9 +323,15 @@ class _StallingHandler(http.server.BaseHTTPRequestHandler):
     def do_GET(self) -> None:  # noqa: N802 (the http.server name)
         if self.path.endswith(".png"):
             threading.Event().wait(5.0)
-            self.send_error(404)
+            try:
+                self.send_error(404)
+            except OSError:  # the browser has closed the page meanwhile
+                pass
             return
-        body = b"<html><body><p>text</p><img src='/stalls.png'></body></html>"
+        body = (b"<html><body><p>text</p><img src='/stalls.png'></body></html>"
+                if self.path == "/stalls.html" else  # a request after the page's load:
+                b"<html><body><p>text</p><script>addEventListener('load', () =>"
+                b" setTimeout(() => fetch('/late.png'), 50))</script></body></html>")
         self.send_response(200)
         self.send_header("Content-Type", "text/html")
         self.send_header("Content-Length", str(len(body)))
@@ -302,18 +342,22 @@ class _StallingHandler(http.server.BaseHTTPRequestHandler):
         pass
 
 
-def test_a_page_that_never_settles_is_its_own_named_problem(browser, monkeypatch):
-    """A stalled request fails that page by name (and the request), not the whole run."""
+@pytest.mark.parametrize(("page", "stalled"), [("stalls.html", "stalls.png"),
+                                              ("late.html", "late.png")])
+def test_a_page_that_never_settles_is_its_own_named_problem(browser, monkeypatch, page,
+                                                            stalled):
+    """A stalled request, during the page's load or after it, fails that page by name (and
+    the request), not the whole run."""
     monkeypatch.setattr(f"{__name__}.PAGE_TIMEOUT_MS", 1000)
     httpd = http.server.ThreadingHTTPServer(("127.0.0.1", 0), _StallingHandler)
     httpd.daemon_threads = True
     threading.Thread(target=httpd.serve_forever, daemon=True).start()
     server = f"http://127.0.0.1:{httpd.server_address[1]}"
     try:
-        got = _open_page(browser, f"{server}/stalls.html", "stalls.html", server)
+        got = _open_page(browser, f"{server}/{page}", page, server)
     finally:
         httpd.shutdown()
     assert len(got["problems"]) == 1, got["problems"]
     problem = got["problems"][0]
-    assert problem.startswith("stalls.html: ") and "stalls.png" in problem, problem
+    assert problem.startswith(f"{page}: ") and stalled in problem, problem
     assert got["images"] == [] and got["equations"] == []
