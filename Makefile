@@ -109,20 +109,32 @@ book: setup
 
 site: book
 
-# The smoke site for the browser test builds in the background beside pytest (the
-# machine's second core; tests/site_build.py), its output in build/site-smoke.log; the
-# browser test waits for it. pytest exits 5 when nothing is collected; that is not a
-# failure of the suite. pytest runs one thread per process unless $OMP_NUM_THREADS says
-# otherwise: the build has the other core, and two threads each on two cores only contend.
+# make test runs in two lanes, one per core of a 2-core machine:
+#   1. pytest over tests/ (the site's browser test last: tests/conftest.py);
+#   2. in the background, the smoke site for the browser test (tests/site_build.py, its
+#      output in build/site-smoke.log), then a second pytest over the notebooks (nbmake)
+#      and the crash harness, its output in build/test-lane2.log, printed at the end.
+# The notebooks run after the site's build, so they reuse the smoke runs it trained and
+# never train one at the same time as it. pytest exits 5 when nothing is collected; that is
+# not a failure of the suite. Each process runs one thread unless $OMP_NUM_THREADS says
+# otherwise: two threads each on two cores only contend.
 SITE_STATUS := $(CURDIR)/build/site-smoke.status
+LANE2_LOG := $(CURDIR)/build/test-lane2.log
+LANE2_TESTS := tests/test_crash_resume.py
 test: notebooks $(MATHJAX) gl browser slurm
-	mkdir -p build && rm -f $(SITE_STATUS)
-	$(BIN)/python tests/site_build.py $(SITE_STATUS) & \
-	OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} \
-	  VSLBOOK_SITE_BUILD=$(SITE_STATUS) VSLBOOK_BUDGET=smoke \
-	  VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke \
-	  $(BIN)/python -m pytest -q --durations=15 tests --nbmake --nbmake-timeout=2400 $(NB_IPY) ; \
-	  rc=$$?; wait; if [ $$rc -eq 5 ]; then rc=0; fi; exit $$rc
+	mkdir -p build && rm -f $(SITE_STATUS) $(LANE2_LOG)
+	export OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} VSLBOOK_SITE_BUILD=$(SITE_STATUS) \
+	  VSLBOOK_BUDGET=smoke VSLBOOK_FIGURES=$(CURDIR)/build/figures-smoke; \
+	( $(BIN)/python tests/site_build.py $(SITE_STATUS); \
+	  $(BIN)/python -m pytest -q -p no:cacheprovider --durations=10 --nbmake \
+	    --nbmake-timeout=2400 $(NB_IPY) $(LANE2_TESTS) > $(LANE2_LOG) 2>&1 ) & \
+	lane2=$$!; \
+	$(BIN)/python -m pytest -q --durations=15 tests --ignore=$(LANE2_TESTS); rc=$$?; \
+	wait $$lane2; rc2=$$?; \
+	echo "== lane 2: the notebooks and $(LANE2_TESTS), after the site's build ($(LANE2_LOG))"; \
+	cat $(LANE2_LOG); \
+	if [ $$rc -eq 5 ]; then rc=0; fi; if [ $$rc2 -eq 5 ]; then rc2=0; fi; \
+	if [ $$rc -ne 0 ]; then exit $$rc; fi; exit $$rc2
 	$(BIN)/ruff check .
 
 test-fast: $(STAMP)

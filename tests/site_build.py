@@ -7,10 +7,11 @@ pytest beside it::
 
     python tests/site_build.py build/site-smoke.status   # writes the build's exit status
 
-``tests/conftest.py`` runs the browser test after every other test of ``tests/`` (and before
-the notebooks, so that no notebook trains the same smoke runs as the build at the same time),
-and its fixture :func:`site` waits for the status that ``$VSLBOOK_SITE_BUILD`` names. Run on
-its own (``pytest tests/test_book_site.py``), the fixture builds the site itself.
+The same background lane then runs the notebooks and the crash harness (a second pytest), so
+that no notebook trains the same smoke runs as the build at the same time.
+``tests/conftest.py`` runs the browser test after every other test of ``tests/``, and its
+fixture :func:`site` waits for the status that ``$VSLBOOK_SITE_BUILD`` names. Run on its
+own (``pytest tests/test_book_site.py``), the fixture builds the site itself.
 
 The build saves its figures to :data:`FIGURES`, a folder of its own: the layout checks read
 the figures of the site's build, not those that tests and notebooks save meanwhile.
