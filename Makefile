@@ -113,14 +113,16 @@ site: book
 #   1. pytest over tests/ (the site's browser test last: tests/conftest.py);
 #   2. in the background, the smoke site for the browser test (tests/site_build.py, its
 #      output in build/site-smoke.log), then a second pytest over the notebooks (nbmake)
-#      and the crash harness, its output in build/test-lane2.log, printed at the end.
+#      and LANE2_TESTS (the crash harness and DIME's seed-axis tests: test files with many
+#      long tests, moved here so that the lanes end at about the same time), its output
+#      in build/test-lane2.log, printed at the end.
 # The notebooks run after the site's build, so they reuse the smoke runs it trained and
 # never train one at the same time as it. pytest exits 5 when nothing is collected; that is
 # not a failure of the suite. Each process runs one thread unless $OMP_NUM_THREADS says
 # otherwise: two threads each on two cores only contend.
 SITE_STATUS := $(CURDIR)/build/site-smoke.status
 LANE2_LOG := $(CURDIR)/build/test-lane2.log
-LANE2_TESTS := tests/test_crash_resume.py
+LANE2_TESTS := tests/test_crash_resume.py tests/test_dime_seeds.py
 test: notebooks $(MATHJAX) gl browser slurm
 	mkdir -p build && rm -f $(SITE_STATUS) $(LANE2_LOG)
 	export OMP_NUM_THREADS=$${OMP_NUM_THREADS:-1} VSLBOOK_SITE_BUILD=$(SITE_STATUS) \
@@ -129,7 +131,7 @@ test: notebooks $(MATHJAX) gl browser slurm
 	  $(BIN)/python -m pytest -q -p no:cacheprovider --durations=10 --nbmake \
 	    --nbmake-timeout=2400 $(NB_IPY) $(LANE2_TESTS) > $(LANE2_LOG) 2>&1 ) & \
 	lane2=$$!; \
-	$(BIN)/python -m pytest -q --durations=15 tests --ignore=$(LANE2_TESTS); rc=$$?; \
+	$(BIN)/python -m pytest -q --durations=15 tests $(LANE2_TESTS:%=--ignore=%); rc=$$?; \
 	wait $$lane2; rc2=$$?; \
 	echo "== lane 2: the notebooks and $(LANE2_TESTS), after the site's build ($(LANE2_LOG))"; \
 	cat $(LANE2_LOG); \

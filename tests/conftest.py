@@ -3,8 +3,9 @@
 ``make test`` builds the smoke site in the background beside pytest (``site_build.py``);
 the browser test waits for that build, so it runs once the rest of ``tests/`` has given the
 build time to finish. The notebooks run in that background lane after the build (a second
-pytest, with the crash harness; see the Makefile), so a notebook that trains a smoke run
-finds the run the build finished, and never trains it at the same time as the build.
+pytest, with the test files of ``LANE2_TESTS``; see the Makefile), so a notebook that
+trains a smoke run finds the run the build finished, and never trains it at the same time
+as the build.
 """
 
 from __future__ import annotations

@@ -7,8 +7,9 @@ pytest beside it::
 
     python tests/site_build.py build/site-smoke.status   # writes the build's exit status
 
-The same background lane then runs the notebooks and the crash harness (a second pytest), so
-that no notebook trains the same smoke runs as the build at the same time.
+The same background lane then runs the notebooks and a few slow test files (a second
+pytest over ``LANE2_TESTS`` of the Makefile), so that no notebook trains the same smoke
+runs as the build at the same time.
 ``tests/conftest.py`` runs the browser test after every other test of ``tests/``, and its
 fixture :func:`site` waits for the status that ``$VSLBOOK_SITE_BUILD`` names. Run on its
 own (``pytest tests/test_book_site.py``), the fixture builds the site itself.
