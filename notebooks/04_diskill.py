@@ -1131,7 +1131,7 @@ for ax, figure in zip(axes, FIGS_4, strict=True):
     sets[figure].mark_probes(ax, DR.LABELS)  # a run still training: faded, "(probe, …)"
     c = DR.counts(task, "diskill", sets[figure].budget)
     probe = " (probes)" if sets[figure].probes else ""
-    ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}, {c['iterations']} "
+    ax.set_title(f"Fig. {figure}: {task}, {sets[figure].budget}{probe}\n{c['iterations']} "
                  f"iterations, {sets[figure].seeds_phrase()}", fontsize=10)  # fmt: skip
 print(f"Fig. 4.4 runs ready in {time.perf_counter() - t0:.0f} s")
 fig.tight_layout()
