@@ -305,6 +305,7 @@ def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_pat
     assert (probe.get_alpha(), probe.get_label()) == (
         0.45, "Di-SkilLV2 (probe, 900/4500 iterations)")
     assert probe.get_linestyle() == "-"  # the method's own style stays
+    assert probe.get_zorder() > finished.get_zorder()  # drawn above the finished curves
     texts = [t.get_text() for t in ax.get_legend().get_texts()]
     assert texts == ["Di-SkilL", "Di-SkilLV2 (probe, 900/4500 iterations)"]
     assert ax.get_legend().get_texts()[0].get_fontsize() == 8

@@ -49,6 +49,8 @@ SMOKE_VERDICT = "smoke: code path only (a few iterations or steps; not compared 
 #: what a figure says instead of a verdict when every run it draws is a probe
 PROBE_VERDICT = "probes: runs still training, not compared with the thesis"
 _LARGEST_FIRST = ("full", "reduced", "smoke")
+#: how far a probe's curve is lifted above the finished curves (:meth:`FigureSet.mark_probes`)
+PROBE_ZORDER_LIFT = 0.5
 #: the opacity of a probe's curve (:meth:`FigureSet.mark_probes`)
 PROBE_ALPHA = 0.45
 #: the figures whose seeds in the thesis differ from the full budget's, with the thesis's
@@ -155,8 +157,9 @@ class FigureSet:
 
     def mark_probes(self, ax: Any, labels: dict[str, str]) -> None:
         """Draw the curves of ``ax`` that come from probes faded (their method's line style
-        is kept: every style is some method's), with "(probe, 900/4500 iterations)" in their legend
-        entry; ``labels`` maps a method to its curve's label.
+        is kept: every style is some method's) and above the finished curves (a faded probe
+        near 0 is otherwise hidden under their markers), with "(probe, 900/4500 iterations)"
+        in their legend entry; ``labels`` maps a method to its curve's label.
 
         Raises:
             ValueError: a method with probes has no label in ``labels``.
@@ -170,6 +173,7 @@ class FigureSet:
         for line in ax.get_lines():
             if line.get_label() in named:
                 line.set_alpha(PROBE_ALPHA)
+                line.set_zorder(line.get_zorder() + PROBE_ZORDER_LIFT)
                 line.set_label(f"{line.get_label()} (probe, {named[line.get_label()]})")
         old = ax.get_legend()
         if named and old is not None:
