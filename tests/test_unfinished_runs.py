@@ -11,7 +11,7 @@ import tarfile
 import pytest
 
 from vslbook.data import DataIntegrityError, gzip_bytes, register_file
-from vslbook.experiments.unfinished_runs import archive_bytes, main, pack, unpack
+from vslbook.experiments.unfinished_runs import archive_bytes, main, pack, recorded_runs, unpack
 from vslbook.run_lock import RunLock
 from vslbook.training import run
 
@@ -64,10 +64,28 @@ def test_pack_is_deterministic_and_drops_runs_that_finished(tmp_path):
     assert f"{part.path.name}/LOCK" not in names
     run("hireps", PLANAR, seed=2, budget="smoke", root=tmp_path / "b", progress=False)
     lines = []
-    gone = pack(tmp_path / "b", out, report=lines.append)
-    assert [(c.action, c.detail) for c in gone] == [("removed", "done")]
-    assert not archive.exists() and lines == [f"removed   {part.path.name}  (done)"]
+    gone = pack(tmp_path / "b", out, report=lines.append, recorded={part.path.name})
+    assert [(c.action, c.detail) for c in gone] == [("removed", "recorded")]
+    assert not archive.exists() and lines == [f"removed   {part.path.name}  (recorded)"]
     assert not (out / "registry.json").exists()  # its only entry went with it
+
+
+def test_a_finished_run_is_carried_until_it_is_recorded(tmp_path):
+    whole = run("hireps", PLANAR, seed=2, budget="smoke", root=tmp_path / "a", progress=False)
+    out = tmp_path / "carried"
+    lines = []
+    kept = pack(tmp_path / "a", out, report=lines.append, recorded={"another-run"})
+    assert [c.action for c in kept] == ["packed"]
+    assert lines[0].startswith(f"packed    {whole.path.name}  (finished, not recorded yet, ")
+    # the runs folder is gone; the archive brings the finished run back, DONE and all
+    unpack(tmp_path / "c", out, report=lambda line: None)
+    back = tmp_path / "c" / whole.path.name
+    for name in ("config.json", "metrics.jsonl", "DONE", "checkpoint/state.pt"):
+        assert (back / name).read_bytes() == (whole.path / name).read_bytes(), name
+    assert pack(tmp_path / "c", out, report=lambda line: None,
+                recorded=set())[0].action == "unchanged"  # fmt: skip
+    gone = pack(tmp_path / "c", out, report=lambda line: None, recorded={whole.path.name})
+    assert [c.action for c in gone] == ["removed"] and not list(out.glob("*.tar.gz"))
 
 
 def test_a_run_being_trained_is_skipped(tmp_path):
@@ -136,3 +154,17 @@ def test_command_line(tmp_path, capsys, monkeypatch):
     (tmp_path / "file").write_text("x")
     assert main(["unpack", "--root", str(tmp_path / "file")]) == 2
     assert "is not a folder" in capsys.readouterr().err
+
+
+def test_recorded_runs_are_the_finished_rows_of_every_recorded_set():
+    import csv
+
+    from vslbook.data import results_dir
+
+    done, probes = set(), set()
+    for table in results_dir().glob("*/*/runs.csv"):
+        with table.open(newline="") as fh:
+            for row in csv.DictReader(fh):
+                (done if row["status"] == "done" else probes).add(row["run"])
+    assert done and probes  # the repository holds both: finished sets and probes
+    assert recorded_runs() == done

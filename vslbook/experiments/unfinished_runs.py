@@ -9,8 +9,12 @@ what is committed, so an unfinished run travels with it:
   has a checkpoint (no ``DONE``, no ``FAILED``) to ``data/unfinished/<run>.tar.gz``: its
   ``config.json``, ``env.json``, ``metrics.jsonl`` and ``checkpoint/``, taken under the
   run's lock (:mod:`vslbook.run_lock`), so a run being trained is skipped, never packed
-  half-written. Each archive is registered (sha256) in ``data/unfinished/registry.json``;
-  the archive of a run that has since finished in ``DIR`` (or failed) is removed.
+  half-written. Each archive is registered (sha256) in ``data/unfinished/registry.json``.
+  A run that has finished in ``DIR`` is packed too, with its ``DONE``, until it is
+  recorded (a ``done`` row of some ``data/results/*/*/runs.csv``,
+  :func:`recorded_runs`): the runs folder may not outlive the sitting, and a finished run
+  that is neither recorded nor carried would be lost. Once it is recorded, or if it
+  failed, its archive is removed.
 * :func:`unpack` (``... unpack --root DIR``) writes each archive back as a run
   directory of ``DIR`` where ``DIR`` has no such run, or has it at an earlier checkpoint
   (that copy is moved to ``DIR/_replaced/``, nothing is deleted). Training it again
@@ -46,13 +50,14 @@ from vslbook.jsonfiles import atomic_write
 from vslbook.results import RunDir
 from vslbook.run_lock import RunLock, RunLockedError
 
-__all__ = ["ARCHIVE_SUFFIX", "Carried", "archive_bytes", "main", "pack", "unfinished_dir",
-           "unpack"]  # fmt: skip
+__all__ = ["ARCHIVE_SUFFIX", "Carried", "archive_bytes", "main", "pack", "recorded_runs",
+           "unfinished_dir", "unpack"]  # fmt: skip
 
 #: the file name of a run's archive is ``<run><ARCHIVE_SUFFIX>``
 ARCHIVE_SUFFIX = ".tar.gz"
-#: the files of a run directory an archive holds (plus everything under ``checkpoint/``)
-_RUN_FILES = (RunDir.CONFIG, RunDir.ENV, RunDir.METRICS)
+#: the files of a run directory an archive holds (plus everything under ``checkpoint/``);
+#: ``DONE`` only in the archive of a finished run that is not recorded yet
+_RUN_FILES = (RunDir.CONFIG, RunDir.ENV, RunDir.METRICS, RunDir.DONE)
 _DESCRIPTION = ("an unfinished run's directory (config.json, env.json, metrics.jsonl, "
                 "checkpoint/), tar + gzip; written by `python -m "
                 "vslbook.experiments.unfinished_runs pack`, read by its `unpack`")
@@ -108,6 +113,19 @@ def _checkpoint_step(run: Path) -> int:
     return checkpoint_step(run)
 
 
+def recorded_runs() -> set[str]:
+    """The names of the runs recorded as finished in any set of ``data/results/``
+    (``status`` ``done`` in its ``runs.csv``; probes are not counted)."""
+    from vslbook.data import results_dir
+    from vslbook.experiments.record import read_set
+
+    names: set[str] = set()
+    for table in sorted(results_dir().glob("*/*/runs.csv")):
+        runs, _, _ = read_set(table.parent)
+        names |= set(runs.loc[runs["status"] == "done", "run"])
+    return names
+
+
 def _check_root(root: Path, *, must_exist: bool) -> None:
     if root.exists() and not root.is_dir():
         raise ValueError(f"root {str(root)!r} is not a folder; expected a folder of run "
@@ -118,22 +136,26 @@ def _check_root(root: Path, *, must_exist: bool) -> None:
 
 
 def pack(root: str | os.PathLike[str], out: str | os.PathLike[str] | None = None,
-         report=print) -> list[Carried]:  # fmt: skip
+         report=print, recorded: set[str] | None = None) -> list[Carried]:  # fmt: skip
     """Archive every unfinished run of ``root`` into ``out`` (default
-    :func:`unfinished_dir`); remove the archives of runs that finished in ``root``.
+    :func:`unfinished_dir`), and every finished one that is not in ``recorded`` (default
+    :func:`recorded_runs`); remove the archives of runs that are recorded or failed.
     ``report(line)`` is called once per run. See the module's docstring."""
     root = Path(root)
     _check_root(root, must_exist=True)
     out = Path(out) if out is not None else unfinished_dir()
+    runs = sorted(p for p in root.iterdir() if (p / RunDir.CONFIG).is_file())
+    if recorded is None and any(RunDir(p).done for p in runs):
+        recorded = recorded_runs()
     done: list[Carried] = []
-    for path in sorted(p for p in root.iterdir() if (p / RunDir.CONFIG).is_file()):
+    for path in runs:
         target = out / f"{path.name}{ARCHIVE_SUFFIX}"
         rd = RunDir(path)
-        if rd.done or rd.failed:
+        if rd.failed or (rd.done and path.name in (recorded or set())):
             if target.exists():
                 target.unlink()
                 unregister_file(target)
-                done.append(Carried(path.name, "removed", "done" if rd.done else "failed"))
+                done.append(Carried(path.name, "removed", "recorded" if rd.done else "failed"))
             continue
         if not (path / RunDir.CHECKPOINT_DIR / RunDir.CHECKPOINT).is_file():
             continue  # nothing a resume could start from
@@ -150,7 +172,8 @@ def pack(root: str | os.PathLike[str], out: str | os.PathLike[str] | None = None
         out.mkdir(parents=True, exist_ok=True)
         atomic_write(target, data)
         register_file(target, _DESCRIPTION)
-        done.append(Carried(path.name, "packed", f"checkpoint at {step}, {len(data):,} bytes"))
+        state = "finished, not recorded yet" if rd.done else f"checkpoint at {step}"
+        done.append(Carried(path.name, "packed", f"{state}, {len(data):,} bytes"))
     for item in done:
         report(str(item))
     return done
