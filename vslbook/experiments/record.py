@@ -386,7 +386,7 @@ def record(figure: str, budget: Budget | str | None = None, root: str | os.PathL
         atomic_write(out / name, data)
         register_file(out / name, _DESCRIPTIONS[name])
     write_provenance(out, body)
-    record_checkpoints(out, fresh)
+    record_checkpoints(out, fresh, runs_frame)
     return report
 
 

@@ -39,7 +39,7 @@ from typing import Any
 import pandas as pd
 
 from vslbook.budget import Budget, get_budget
-from vslbook.data import data_dir, gzip_bytes, register_file, verify_file
+from vslbook.data import data_dir, gzip_bytes, register_file, unregister_file, verify_file
 from vslbook.jsonfiles import atomic_write, json_bytes
 from vslbook.results import RunDir
 
@@ -61,26 +61,40 @@ def materialised_root() -> Path:
 # --------------------------------------------------------------------------- checkpoints
 
 
-def record_checkpoints(out: Path, fresh: dict[str, tuple[RunDir, Any]]) -> list[str]:
-    """Copy the final checkpoint of the first seed of each (method, env) among ``fresh``
-    (run name → (run directory, :class:`~vslbook.experiments.run_plan.FigureRun`)) into
-    ``out/checkpoints/<run>.pt.gz``, registered; return the names copied.
+def record_checkpoints(out: Path, fresh: dict[str, tuple[RunDir, Any]],
+                       in_set: pd.DataFrame | None = None) -> list[str]:  # fmt: skip
+    """Copy the final checkpoint of the first seed of each (method, env) into
+    ``out/checkpoints/<run>.pt.gz``, registered, where that run is among ``fresh`` (run
+    name → (run directory, :class:`~vslbook.experiments.run_plan.FigureRun`)); return the
+    names copied.
 
-    Only the first seed's: a figure that draws a trained policy (Fig. 3.2's coverage, the
-    skills of Fig. 4.2) draws seed 0's, and keeping every seed's would multiply the
-    repository's size by the seed count.
+    The first seed is taken over the whole set, ``in_set`` (its ``runs.csv`` frame: run,
+    method, env, seed; default: ``fresh`` alone), so a seed recorded later from a folder
+    that lacks seed 0 adds no checkpoint, and a checkpoint of any other run in the folder
+    is removed. Only the first seed's: a figure that draws a trained policy (Fig. 3.2's
+    coverage, the skills of Fig. 4.2) draws seed 0's, and keeping every seed's would
+    multiply the repository's size by the seed count.
     """
+    rows = [(run.method, run.env, run.seed, name) for name, (_rd, run) in fresh.items()]
+    if in_set is not None:
+        rows += [(r["method"], r["env"], int(r["seed"]), r["run"])
+                 for r in in_set.to_dict("records")]  # fmt: skip
     first: dict[tuple[str, str], tuple[int, str]] = {}
-    for name, (_rd, run) in fresh.items():
-        key = (run.method, run.env)
-        if key not in first or (run.seed, name) < first[key]:
-            first[key] = (run.seed, name)
+    for method, env, seed, name in rows:
+        if (method, env) not in first or (seed, name) < first[(method, env)]:
+            first[(method, env)] = (seed, name)
+    keep = {name for _, name in first.values()}
+    folder = out / CHECKPOINTS
+    for stale in sorted(folder.glob("*.pt.gz")) if folder.is_dir() else []:
+        if stale.name[: -len(".pt.gz")] not in keep:
+            stale.unlink()
+            unregister_file(stale)
     written = []
-    for _, name in sorted(first.values(), key=lambda pair: pair[1]):
+    for name in sorted(keep & set(fresh)):
         rd = fresh[name][0]
         if not rd.checkpoint_path.is_file():
             continue
-        target = out / CHECKPOINTS / f"{name}.pt.gz"
+        target = folder / f"{name}.pt.gz"
         target.parent.mkdir(parents=True, exist_ok=True)
         atomic_write(target, gzip_bytes(rd.checkpoint_path.read_bytes()))
         register_file(target, _CHECKPOINT_DESCRIPTION)
