@@ -286,6 +286,27 @@ def test_probes_are_counted_apart_from_seeds_and_never_compared(tmp_path):
         "0 finished seeds")
 
 
+def test_a_probe_of_a_method_with_finished_seeds_is_held_back(tmp_path):
+    for seed, name in [*enumerate(("d0", "d1", "d2")), (0, "v0")]:
+        (tmp_path / name).mkdir()
+        (tmp_path / name / RunDir.CONFIG).write_text(json.dumps({"seed": seed}))
+    runs = {"diskill": [tmp_path / n for n in ("d0", "d1", "d2")],
+            "diskill-v2": [tmp_path / "v0"]}  # fmt: skip
+    fs = FigureSet("fig4-3b", "full", runs, seeds_full=dict.fromkeys(runs, 24),
+                   probes={"d2": "150/4500 iterations", "v0": "900/4500 iterations"})  # fmt: skip
+    fs.hold_back()
+    # the finished seeds are drawn alone; a probe-only method keeps its probe
+    assert fs.runs == {"diskill": [tmp_path / "d0", tmp_path / "d1"],
+                       "diskill-v2": [tmp_path / "v0"]}  # fmt: skip
+    assert fs.probes == {"v0": "900/4500 iterations"}
+    assert fs.held == {"d2": "s2 at 150/4500 iterations"}
+    assert fs.probe_progress() == {"diskill-v2": "900/4500 iterations"}
+    caption = fs.caption()
+    assert "seeds diskill 2 of 24, diskill-v2 0 of 24 and 1 probe" in caption
+    assert "still training, not drawn until they finish: d2 s2 at 150/4500 iterations" in caption
+    assert fs.verdict("as in the thesis", ("diskill", "bbrl")) == "as in the thesis"
+
+
 def test_mark_probes_fades_the_probe_curves_and_names_them_in_the_legend(tmp_path):
     import matplotlib
 

@@ -105,6 +105,10 @@ class FigureSet:
             (their configuration changed since they were recorded).
         probes: name → progress (e.g. ``900/4500 iterations``) of the recorded runs that were
             still training when recorded (``vslbook record --partial``): drawn as probes.
+        held: name → ``"s2 at 150/4500 iterations"`` of the recorded runs still training
+            whose method has finished seeds in the set (:meth:`hold_back`): not drawn, so
+            that a run still training is neither mixed into the finished seeds' curve nor
+            turns their comparison into a probe's; the caption names them.
     """
 
     figure: str
@@ -115,6 +119,7 @@ class FigureSet:
     seeds_full: dict[str, int] = field(default_factory=dict)
     not_drawn: list[str] = field(default_factory=list)
     probes: dict[str, str] = field(default_factory=dict)
+    held: dict[str, str] = field(default_factory=dict)
 
     @property
     def smoke(self) -> bool:
@@ -154,6 +159,19 @@ class FigureSet:
                 if p.name in self.probes:
                     out.setdefault(method, []).append(self.probes[p.name])
         return {m: ", ".join(dict.fromkeys(v)) for m, v in out.items()}
+
+    def hold_back(self) -> None:
+        """Move each probe of a method that also has a finished seed from :attr:`runs` and
+        :attr:`probes` to :attr:`held`. A method with probes only keeps them (drawn
+        faded, :meth:`mark_probes`): they show where success starts; a further seed of a
+        method that has finished ones adds nothing to the figure until it finishes."""
+        for method, paths in self.runs.items():
+            if self.finished(method) == 0:
+                continue
+            for p in [p for p in paths if p.name in self.probes]:
+                paths.remove(p)
+                seed = RunDir(p).config.get("seed")
+                self.held[p.name] = f"s{seed} at {self.probes.pop(p.name)}"
 
     def mark_probes(self, ax: Any, labels: dict[str, str]) -> None:
         """Draw the curves of ``ax`` that come from probes faded (their method's line style
@@ -232,6 +250,9 @@ class FigureSet:
             notes.append("probes, still training: " + ", ".join(
                 f"{n.split('-vslbook')[0]} s{RunDir(p).config.get('seed')} at {self.probes[n]}"
                 for n, p in self._paths().items() if n in self.probes))  # fmt: skip
+        if self.held:
+            notes.append("still training, not drawn until they finish: " + ", ".join(
+                f"{n.split('-vslbook')[0]} {h}" for n, h in self.held.items()))  # fmt: skip
         if self.smoke:
             notes.append("smoke: code path only")
         return line + ("; " + "; ".join(notes) if notes else "") + "."
@@ -285,6 +306,7 @@ def _assemble(figure: str, b: Budget, declared: list[FigureRun], root: Path,
                 step = int(rows[-1].get(r.unit, 0) or 0) if rows else 0
                 out.probes[r.name] = r.progress(step)
     out.not_drawn = sorted(set(recorded) - {r.name for r in figure_runs(figure, b)})
+    out.hold_back()
     return out
 
 
