@@ -1211,7 +1211,8 @@ plt.show()
 # iterations, seeds 0 and 1 recorded) both methods succeed; BBRL rises faster and ends
 # higher, as in the thesis (the figure below; the final rates are printed under it). The
 # variants without the curriculum and SVSL train to a share of their budget (900 of 4500
-# iterations; SVSL 4020 of its 20,100), printed in the legend. An earlier probe of
+# iterations; SVSL, whose 20,100 iterations are cheap, towards its whole budget), printed
+# in the legend. An earlier probe of
 # Di-SkilL (600 iterations, made outside the book before the full-budget runs, recorded in
 # `data/measurements/` and printed below) saw the same start: the ball is hit only after a
 # few hundred iterations. At `VSLBOOK_BUDGET=reduced` (2 % of the iterations) the success
