@@ -1210,9 +1210,9 @@ plt.show()
 # drawn faded with how far it got, and is not compared). At the thesis's budget (4500
 # iterations, seeds 0 and 1 recorded) both methods succeed; BBRL rises faster and ends
 # higher, as in the thesis (the figure below; the final rates are printed under it). The
-# variants without the curriculum and SVSL train to a share of their budget (900 of 4500
-# iterations; SVSL, whose 20,100 iterations are cheap, towards its whole budget), printed
-# in the legend. An earlier probe of
+# variants without the curriculum train to a share of their budget (900 of 4500
+# iterations), printed in the legend; SVSL, whose 20,100 iterations are cheap, trained its
+# whole budget. An earlier probe of
 # Di-SkilL (600 iterations, made outside the book before the full-budget runs, recorded in
 # `data/measurements/` and printed below) saw the same start: the ball is hit only after a
 # few hundred iterations. At `VSLBOOK_BUDGET=reduced` (2 % of the iterations) the success
@@ -1267,10 +1267,11 @@ display(measurements("table_tennis_probe.csv"))  # the probe, with its provenanc
 # **The thesis's explanation** (Section 4.5.2): Gaussian per-expert context distributions
 # that need tuned punishment terms, together with linear experts, cannot reach a
 # satisfying performance. **Ours**: the line under the table counts the experts that
-# learned. In the recorded full-budget run the first expert or two learn; the later ones
-# are pushed to the edges of the context box, where many of their draws are punished or
-# rejected, and their $\theta$-entropy stays near its start, so the test contexts they
-# hold fail.
+# learned. In the recorded full-budget run a few experts learn, and the weight phase
+# (Eq. A.7) moves $\pi(o)$ onto them; the others are pushed towards the edges of the
+# context box or past them, where most of their draws are punished or rejected, and their
+# $\theta$-entropy stays near its start, so the test contexts the gating sends to them
+# fail.
 
 # %%
 from vslbook.experiments import svsl_experts as SE
