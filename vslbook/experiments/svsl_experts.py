@@ -83,6 +83,7 @@ def expert_table(
     tc = svsl.test_contexts
     best = np.argmax(m.log_gating(tc), axis=1)
     test_out = task.evaluate(m.expert_means(tc, best), tc, workers=workers)
+    context_entropy, expert_entropy = m.context_entropy(), m.expert_entropy()
     rows = []
     for o in range(m.n_experts):
         c, th = m.sample_curriculum(o, draws, rng)
@@ -91,9 +92,9 @@ def expert_table(
         rows.append({
             "expert": o,
             "pi_o": float(np.exp(log_w[o])),
-            "context_entropy": float(m.context_entropy()[o]),
+            "context_entropy": float(context_entropy[o]),
             "context_valid": float(np.mean(task.context_valid(c))),
-            "expert_entropy": float(m.expert_entropy()[o]),
+            "expert_entropy": float(expert_entropy[o]),
             "expert_entropy_start": float(start),
             "executed": out.n_executed / draws,
             "success": float(np.mean(out.success)) if task.has_success else np.nan,
