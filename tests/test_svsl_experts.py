@@ -20,15 +20,16 @@ ENV = "vslbook/TableTennis4D-v0"
 @pytest.fixture(scope="module")
 def svsl():
     """An SVSL state on the 4D table tennis with two experts placed by hand: one whose
-    contexts all lie far outside the valid region, one whose contexts all lie at the
-    centre of the valid box with θ = 0 and a narrow covariance."""
+    contexts all lie far outside the valid region (mean θ = 0.3 in every coordinate), one
+    whose contexts all lie at the centre of the valid box with θ = 0 and a narrow
+    covariance."""
     task = make_task("table-tennis-4d")
     s = SVSL(task, svsl_tt_config("smoke"), seed=0)
     dc, dt = task.context_dim, task.n_params
     centre = 0.5 * (task.context_low + task.context_high)
     tiny = 1e-8 * np.eye(dc)
     s.model.add_expert(centre + np.array([5.0, 0, 0, 0]), tiny, np.zeros((dt, dc)),
-                       np.zeros(dt), 0.5**2 * np.eye(dt))  # fmt: skip
+                       np.full(dt, 0.3), 0.5**2 * np.eye(dt))  # fmt: skip
     s.model.add_expert(centre, tiny, np.zeros((dt, dc)), np.zeros(dt), 1e-6**2 * np.eye(dt))
     yield s
     task.close()
@@ -89,3 +90,34 @@ def test_load_svsl_restores_a_run_and_refuses_other_algorithms(tmp_path, monkeyp
                                         .replace('"algo": "svsl"', '"algo": "hireps"'))  # fmt: skip
     with pytest.raises(ValueError, match="'hireps' run, expected an 'svsl' run"):
         load_svsl(r.path)
+
+
+def test_test_contexts_are_run_with_the_mean_of_the_expert_holding_them(svsl, monkeypatch):
+    """Algorithm 3's inference: each test context c is run with the mean θ of
+    argmax_o π(o | c), here the centred expert's θ = 0 for every one, never the far
+    expert's 0.3."""
+    seen = []
+    evaluate = svsl.task.evaluate
+
+    def spy(theta, contexts, **kw):
+        seen.append((np.array(theta), np.array(contexts)))
+        return evaluate(theta, contexts, **kw)
+
+    monkeypatch.setattr(svsl.task, "evaluate", spy)
+    expert_table(svsl, draws=1, workers=0)
+    tests = [(th, c) for th, c in seen if np.array_equal(c, svsl.test_contexts)]
+    assert len(tests) == 1
+    np.testing.assert_array_equal(tests[0][0], np.zeros((len(svsl.test_contexts),
+                                                         svsl.task.n_params)))  # fmt: skip
+
+
+def test_load_svsl_keeps_the_test_contexts_its_run_used(tmp_path, monkeypatch):
+    """The Chapter 3 5-link reacher's SVSL is tested on PPO's evaluation goals (Fig. 3.5):
+    the loaded model's test contexts are the ones its run logged its success on."""
+    from vslbook.erl.ppo import evaluation_goals
+
+    monkeypatch.setenv("VSLBOOK_WORKERS", "0")
+    r = run("svsl", "vslbook/Reacher5Ch3-v0", seed=0, budget="smoke", root=tmp_path,
+            progress=False, overrides={"reward": "3.8"})  # fmt: skip
+    s = load_svsl(r.path)
+    np.testing.assert_array_equal(s.test_contexts, evaluation_goals(s.config.test_contexts))

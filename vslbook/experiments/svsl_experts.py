@@ -41,8 +41,12 @@ COLUMNS = (
 
 
 def load_svsl(path: str | Path) -> Any:
-    """The :class:`~vslbook.erl.svsl.SVSL` state of a run directory (its last checkpoint)."""
+    """The :class:`~vslbook.erl.svsl.SVSL` state of a run directory (its last checkpoint),
+    with the test contexts its run evaluated on (PPO's evaluation goals for the Chapter 3
+    5-link reacher, Fig. 3.5, as :func:`~vslbook.experiments.ch3_algorithms.train_svsl`
+    sets them)."""
     from vslbook.envs.robot import make_task
+    from vslbook.erl.ppo import evaluation_goals
     from vslbook.erl.svsl import SVSL
     from vslbook.experiments.ch3_algorithms import SVSL_ENVS, SVSLRun, task_of
     from vslbook.registry import config_from_record
@@ -54,8 +58,11 @@ def load_svsl(path: str | Path) -> Any:
         raise ValueError(f"{rd.path} is a {record.get('algo')!r} run, expected an 'svsl' run")
     config = config_from_record(SVSLRun, record)
     kwargs = {} if config.reward is None else {"reward": config.reward}
-    task = make_task(task_of(record["env"], SVSL_ENVS), **kwargs)
+    task_name = task_of(record["env"], SVSL_ENVS)
+    task = make_task(task_name, **kwargs)
     svsl = SVSL(task, config, int(record["seed"]))
+    if task_name == "reacher5-ch3":
+        svsl.test_contexts = evaluation_goals(config.test_contexts)
     saved = rd.load_checkpoint()
     if saved is None:
         raise FileNotFoundError(f"{rd.path} has no checkpoint to load")
