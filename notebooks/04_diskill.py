@@ -1165,6 +1165,36 @@ for figure in ("4.3c", "4.4a"):
                             reps=budget.bootstrap_reps))  # fmt: skip
 
 # %% [markdown]
+# **Where BBRL loses on 5LR** (not a figure of the thesis). The thesis widened the reacher's
+# goals to the whole disk so that one goal has several good movements (Section 4.5.1): a goal
+# straight behind the arm (±180° from the start posture along $+x$) is reached by turning
+# either way. One Gaussian policy per context (BBRL) has one mean θ there, and a mean between
+# the two turns reaches neither; Di-SkilL's experts can take one turn each. Below, seed 0 of
+# each method of the figure's runs, at goals on a ring of radius 0.4 m every 5°, run as the
+# test runs them (Algorithm 3 with the experts' mean θ,
+# `vslbook.experiments.diskill_reacher.goal_returns`). The shaded bands are the goals behind
+# the arm.
+
+# %%
+ring_returns = {DR.LABELS[m]: RF.goal_returns(DR.load_model(runs_5lr[m][0]), RF.ring(0.4, 5.0))
+                for m in ("diskill", "bbrl") if runs_5lr.get(m)}  # fmt: skip
+fig, axes = panel_grid(1, panel=(7.5, 4.2))
+RF.draw_goal_returns(axes[0], ring_returns)
+axes[0].set_title(f"5LR: return at goals 0.4 m from the base (seed 0, {set_5lr.budget})",
+                  fontsize=10)  # fmt: skip
+fig.tight_layout()
+annotate(fig, set_5lr)  # where the runs came from, under the figure
+save_figure(fig, "fig-4-3c-goal-angles")
+plt.show()
+for label, f in ring_returns.items():
+    behind = f[f["angle"].abs() >= 150]
+    worst = behind["return"].idxmin()
+    print(f"{label}: median return {f['return'].median():.2f} over the ring; behind the arm "
+          f"(|angle| ≥ 150°) median {behind['return'].median():.2f}, worst "
+          f"{behind['return'][worst]:.1f} at {behind['angle'][worst]:.0f}°; goals below −5: "
+          f"{int((f['return'] < -5).sum())} of {len(f)}")  # fmt: skip
+
+# %% [markdown]
 # **The test curves taken apart** (not a figure of the thesis). A success curve stays at
 # zero until the first test episode succeeds, and the test return mixes two things: the
 # return of the θ that were executed, and the fixed penalty of those rejected before

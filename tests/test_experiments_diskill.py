@@ -129,6 +129,45 @@ def test_fig_4_2_analysis(reacher_runs):
     assert asdict(bbrl.config) == asdict(expected)
 
 
+def test_goal_returns_by_angle(reacher_runs):
+    import json
+    import math
+
+    goals = R.ring(0.4, 90.0)
+    np.testing.assert_allclose(goals, [[-0.4, 0], [0, -0.4], [0.4, 0], [0, 0.4]], atol=1e-12)
+    bbrl = D.load_model(reacher_runs["bbrl"][0])
+    t = R.goal_returns(bbrl, goals)
+    assert list(t.columns) == ["angle", "radius", "expert", "return", "tip_distance"]
+    np.testing.assert_allclose(t["angle"], [-180, -90, 0, 90], atol=1e-9)  # from −180° on
+    np.testing.assert_allclose(t["radius"], 0.4)
+    assert (t["expert"] == 0).all()  # BBRL: one policy
+    # on the run's own test contexts BBRL's mean θ gives the test return its run logged last
+    lines = (reacher_runs["bbrl"][0] / "metrics.jsonl").read_text().splitlines()
+    logged = [json.loads(x)["test_return"] for x in lines if "test_return" in json.loads(x)]
+    own = R.goal_returns(bbrl, bbrl.test_contexts)
+    assert own["return"].mean() == pytest.approx(logged[-1], rel=1e-9)
+    # the final tip distance from the simulated path (Fig. 4.2c's reaches), goal by goal
+    dis = D.load_model(reacher_runs["diskill"][0])
+    d = R.goal_returns(dis, goals, seed=3)
+    assert d.equals(R.goal_returns(dis, goals, seed=3))
+    theta = dis.mean_parameters(goals, d["expert"].to_numpy())
+    for th, goal, dist in zip(theta, goals, d["tip_distance"], strict=True):
+        tip = dis.task.path(th, goal)["fingertip"][-1, :2]
+        assert dist == pytest.approx(math.dist(tip, goal), abs=1e-9)
+    fig, ax = plt.subplots()
+    R.draw_goal_returns(ax, {"Di-SkilL": d, "BBRL": t})
+    assert [line.get_label() for line in ax.get_lines()] == ["Di-SkilL", "BBRL"]
+    np.testing.assert_allclose(ax.get_lines()[1].get_xdata(), [-180, -90, 0, 90], atol=1e-9)
+    assert ax.get_yscale() == "symlog"
+    plt.close(fig)
+    with pytest.raises(ValueError, match=r"goals must be an \(M, 2\) array.*\(3,\)"):
+        R.goal_returns(bbrl, np.zeros(3))
+    with pytest.raises(ValueError, match=r"radius must be in \(0, 0.5\].*0.6"):
+        R.ring(0.6)
+    with pytest.raises(ValueError, match="step must be in .*got 0"):
+        R.ring(0.4, 0)
+
+
 def test_ppo_ch4_from_the_command_line(tmp_path, monkeypatch):
     """`vslbook run ppo-ch4`: Table B.3 at Di-SkilL's episode count; rows carry `samples`."""
     from vslbook.budget import get_budget

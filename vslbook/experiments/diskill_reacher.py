@@ -9,6 +9,12 @@
 * (c) diverse solutions for the same goal: the tip trajectories of the experts' mean θ
   (:func:`reaches`, :func:`draw_reaches`).
 
+And, behind Fig. 4.3c, where on the disk a model (Di-SkilL or BBRL) loses return:
+:func:`goal_returns` runs Algorithm 3 (o ~ π(o | c), the expert's mean θ) at given goals,
+:func:`ring` places goals on a circle by their angle from the start posture (the arm lies
+along +x, so ±180° is straight behind it, where the arm can turn either way), and
+:func:`draw_goal_returns` plots the return against that angle, one line per model.
+
 π(c | o) is evaluated with the model's own normaliser, a fixed batch of contexts from p(c)
 (:meth:`vslbook.erl.diskill.DiSkill.choose_experts`): with N contexts c_j ~ p(c),
 π(c | o) / p(c) ≈ exp φ_o(c) / mean_j exp φ_o(c_j).
@@ -20,11 +26,12 @@ from typing import Any
 
 import matplotlib.pyplot as plt
 import numpy as np
+import pandas as pd
 import torch
 
 __all__ = [
     "active_experts", "disk_grid", "draw_active_experts", "draw_context_regions",
-    "draw_reaches", "log_preference", "reaches",
+    "draw_goal_returns", "draw_reaches", "goal_returns", "log_preference", "reaches", "ring",
 ]  # fmt: skip
 
 RADIUS = 0.5  # 5LR's goals: the disk of radius 0.5 around the first joint (B.4.3)
@@ -151,4 +158,56 @@ def draw_reaches(
         ax.plot(*goal, "*", color="tab:red", ms=10, mec="k", mew=0.5)
     _disk(ax)
     ax.set_title(f"(c) tip paths of experts with π(o|c) ≥ {min_gating:g}")
+    return ax
+
+
+# --------------------------------------------------------------------------- Fig. 4.3c
+
+
+def ring(radius: float = 0.4, step: float = 5.0) -> np.ndarray:
+    """Goals on the circle of ``radius`` around the first joint, every ``step`` degrees from
+    −180° (behind the arm) on: (M, 2)."""
+    if not 0 < radius <= RADIUS:
+        raise ValueError(f"radius must be in (0, {RADIUS}] (the goal disk), got {radius!r}")
+    if not 0 < step <= 180:
+        raise ValueError(f"step must be in (0, 180] degrees, got {step!r}")
+    angle = np.radians(np.arange(-180.0, 180.0, step))
+    return radius * np.stack([np.cos(angle), np.sin(angle)], 1)
+
+
+def goal_returns(model: Any, goals: np.ndarray, seed: int = 0) -> pd.DataFrame:
+    """Algorithm 3 at each goal, as the test evaluation runs it: o ~ π(o | c) (from
+    ``seed``), the expert's mean θ, one episode. Columns: ``angle`` (degrees from +x, the
+    start posture), ``radius``, ``expert``, ``return`` and ``tip_distance`` (m)."""
+    goals = np.asarray(goals, dtype=np.float64)
+    if goals.ndim != 2 or goals.shape[1] != 2 or not len(goals):
+        raise ValueError(f"goals must be an (M, 2) array with M >= 1, got shape {goals.shape}")
+    o = model.choose_experts(goals, torch.Generator().manual_seed(int(seed)))
+    out = model.task.evaluate(model.mean_parameters(goals, o), goals, workers=0)
+    return pd.DataFrame({
+        "angle": np.degrees(np.arctan2(goals[:, 1], goals[:, 0])),
+        "radius": np.hypot(goals[:, 0], goals[:, 1]),
+        "expert": o,
+        "return": out.returns,
+        "tip_distance": out.info["tip_distance"],
+    })  # fmt: skip
+
+
+def draw_goal_returns(ax: plt.Axes, returns: dict[str, pd.DataFrame]) -> plt.Axes:
+    """The return against the goal's angle, one line per model (label → :func:`goal_returns`
+    on a :func:`ring`; a label that names a method takes its style), on a symmetric-log
+    axis: the goals behind the arm can cost a hundred times more than the rest."""
+    from vslbook.plot_style import is_method, method_style
+
+    for label, frame in returns.items():
+        f = frame.sort_values("angle")
+        style = method_style(label) | {"marker": "o"} if is_method(label) else {"marker": "o"}
+        ax.plot(f["angle"], f["return"], ms=3, lw=1.2, label=label, **style)
+    ax.set_yscale("symlog", linthresh=1.0)
+    ax.set_xticks(np.arange(-180, 181, 45))
+    ax.axvspan(-180, -150, color="0.9", zorder=0)
+    ax.axvspan(150, 180, color="0.9", zorder=0, label="behind the arm (±150–180°)")
+    ax.set_xlabel("goal angle from the start posture (degrees)")
+    ax.set_ylabel("return (mean θ, symlog)")
+    ax.legend(fontsize=8)
     return ax
