@@ -1238,7 +1238,7 @@ plt.show()
 # success. **Ours**: the runs recorded at the largest budget (the caption under the figure
 # says how many seeds each method has; a probe, a run recorded while still training, is
 # drawn faded with how far it got, and is not compared). At the thesis's budget (4500
-# iterations, seeds 0–2 of Di-SkilL and 0–1 of BBRL recorded) both methods succeed; BBRL rises faster and ends
+# iterations, seeds 0–2 of each recorded) both methods succeed; BBRL rises faster and ends
 # higher, as in the thesis (the figure below; the final rates are printed under it). The
 # variants without the curriculum train to a share of their budget (900 of 4500
 # iterations), printed in the legend; SVSL, whose 20,100 iterations are cheap, trained its
