@@ -1187,10 +1187,10 @@ annotate(fig, set_5lr)  # where the runs came from, under the figure
 save_figure(fig, "fig-4-3c-goal-angles")
 plt.show()
 for label, f in ring_returns.items():
-    behind = f[f["angle"].abs() >= 150]
+    behind = f[f["angle"].abs() >= RF.BEHIND_ARM_DEG]
     worst = behind["return"].idxmin()
     print(f"{label}: median return {f['return'].median():.2f} over the ring; behind the arm "
-          f"(|angle| ≥ 150°) median {behind['return'].median():.2f}, worst "
+          f"(|angle| ≥ {RF.BEHIND_ARM_DEG:g}°) median {behind['return'].median():.2f}, worst "
           f"{behind['return'][worst]:.1f} at {behind['angle'][worst]:.0f}°; goals below −5: "
           f"{int((f['return'] < -5).sum())} of {len(f)}")  # fmt: skip
 

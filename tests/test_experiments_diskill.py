@@ -159,6 +159,10 @@ def test_goal_returns_by_angle(reacher_runs):
     assert [line.get_label() for line in ax.get_lines()] == ["Di-SkilL", "BBRL"]
     np.testing.assert_allclose(ax.get_lines()[1].get_xdata(), [-180, -90, 0, 90], atol=1e-9)
     assert ax.get_yscale() == "symlog"
+    # the shaded bands are the goals behind the arm, |angle| from 150° to 180°
+    spans = sorted((p.get_x(), p.get_x() + p.get_width()) for p in ax.patches)
+    np.testing.assert_allclose(spans, [[-180, -150], [150, 180]])
+    assert R.BEHIND_ARM_DEG == 150
     plt.close(fig)
     with pytest.raises(ValueError, match=r"goals must be an \(M, 2\) array.*\(3,\)"):
         R.goal_returns(bbrl, np.zeros(3))

@@ -164,6 +164,12 @@ def draw_reaches(
 # --------------------------------------------------------------------------- Fig. 4.3c
 
 
+#: Goals at least this many degrees from the start posture (+x) lie "behind the arm": the
+#: arm must turn through half a circle, and one Gaussian's mean θ can fall between the two
+#: ways round (Fig. 4.3c's ring; shaded by :func:`draw_goal_returns`).
+BEHIND_ARM_DEG = 150.0
+
+
 def ring(radius: float = 0.4, step: float = 5.0) -> np.ndarray:
     """Goals on the circle of ``radius`` around the first joint, every ``step`` degrees from
     −180° (behind the arm) on: (M, 2)."""
@@ -205,8 +211,9 @@ def draw_goal_returns(ax: plt.Axes, returns: dict[str, pd.DataFrame]) -> plt.Axe
         ax.plot(f["angle"], f["return"], ms=3, lw=1.2, label=label, **style)
     ax.set_yscale("symlog", linthresh=1.0)
     ax.set_xticks(np.arange(-180, 181, 45))
-    ax.axvspan(-180, -150, color="0.9", zorder=0)
-    ax.axvspan(150, 180, color="0.9", zorder=0, label="behind the arm (±150–180°)")
+    edge = BEHIND_ARM_DEG
+    ax.axvspan(-180, -edge, color="0.9", zorder=0)
+    ax.axvspan(edge, 180, color="0.9", zorder=0, label=f"behind the arm (±{edge:g}–180°)")
     ax.set_xlabel("goal angle from the start posture (degrees)")
     ax.set_ylabel("return (mean θ, symlog)")
     ax.legend(fontsize=8)
