@@ -1278,6 +1278,20 @@ print(reproduction_text("fig4-3b", tt_set, "test_success", reps=budget.bootstrap
 display(measurements("table_tennis_probe.csv"))  # the probe, with its provenance in data/
 
 # %% [markdown]
+# **At equal executed episodes.** "Needs more samples" is about the episodes a method has
+# executed, so a run that stops short of Di-SkilL's budget (the variants' probes, SVSL's
+# cheap 20,100 iterations) is compared with Di-SkilL at the executed episodes *it*
+# reached. Below, each such run's last test, and Di-SkilL's seeds at their last test at or
+# before the same count (`vslbook.experiments.equal_samples`: single tests of the 75
+# contexts, as logged, not interpolated).
+
+# %%
+from vslbook.experiments import equal_samples as ES
+
+if runs_tt.get("diskill"):
+    print("\n".join(ES.compare_lines(runs_tt, reference="diskill", labels=DR.LABELS)))
+
+# %% [markdown]
 # ### Why SVSL's curve stays low: its experts one by one
 #
 # SVSL adds one linear expert every 1,000 iterations and trains the newest. Each expert
