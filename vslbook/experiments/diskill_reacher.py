@@ -31,7 +31,8 @@ import torch
 
 __all__ = [
     "active_experts", "disk_grid", "draw_active_experts", "draw_context_regions",
-    "draw_goal_returns", "draw_reaches", "goal_returns", "log_preference", "reaches", "ring",
+    "draw_goal_returns", "draw_reaches", "goal_returns", "goal_returns_table",
+    "log_preference", "reaches", "ring", "ring_summary", "test_goal_summary",
 ]  # fmt: skip
 
 RADIUS = 0.5  # 5LR's goals: the disk of radius 0.5 around the first joint (B.4.3)
@@ -197,6 +198,79 @@ def goal_returns(model: Any, goals: np.ndarray, seed: int = 0) -> pd.DataFrame:
         "return": out.returns,
         "tip_distance": out.info["tip_distance"],
     })  # fmt: skip
+
+
+#: A goal whose return is below this is one the model fails (a reached goal costs about −1
+#: on the 5-link reacher; one the tip misses costs tens to hundreds).
+POOR_RETURN = -5.0
+_POOR = f"{POOR_RETURN:g}".replace("-", "−")  # as printed
+
+
+def ring_summary(frame: pd.DataFrame) -> str:
+    """One line on :func:`goal_returns` at a :func:`ring`: the median return over the ring,
+    the median and the worst behind the arm (|angle| ≥ :data:`BEHIND_ARM_DEG`), and how many
+    goals are below :data:`POOR_RETURN`."""
+    behind = frame[frame["angle"].abs() >= BEHIND_ARM_DEG]
+    if behind.empty:
+        raise ValueError(f"no goal behind the arm (|angle| >= {BEHIND_ARM_DEG:g}°) in the ring")
+    worst = behind["return"].idxmin()
+    poor = int((frame["return"] < POOR_RETURN).sum())
+    return (f"median return {frame['return'].median():.2f} over the ring; behind the arm "
+            f"(|angle| ≥ {BEHIND_ARM_DEG:g}°) median {behind['return'].median():.2f}, worst "
+            f"{behind['return'][worst]:.1f} at {behind['angle'][worst]:.0f}°; goals below "
+            f"{_POOR}: {poor} of {len(frame)}")  # fmt: skip
+
+
+def test_goal_summary(frame: pd.DataFrame) -> str:
+    """One line on :func:`goal_returns` at a run's test goals: the mean return (for a single
+    policy, the test return the run logged last), the goals below :data:`POOR_RETURN` with
+    their return, angle and distance, and the mean without them."""
+    poor = frame["return"] < POOR_RETURN
+    goals = ", ".join(f"{r['return']:.0f} at {r['angle']:.0f}° ({r['radius']:.2f} m)"
+                      for _, r in frame[poor].sort_values("return").iterrows())  # fmt: skip
+    return (f"mean return {frame['return'].mean():.2f} over its {len(frame)} test goals; "
+            f"{int(poor.sum())} below {_POOR}" + (f": {goals}" if goals else "")
+            + f"; without them {frame.loc[~poor, 'return'].mean():.2f}")  # fmt: skip
+
+
+#: What :func:`goal_returns_table` evaluates each model at: the ring of Fig. 4.3c's panel and
+#: the run's own 75 fixed test goals.
+GOAL_SETS = ("ring 0.4 m, every 5°", "test contexts")
+
+
+def goal_returns_table(runs: dict[str, list[Any]], seeds: tuple[int, ...] | None = None
+                       ) -> pd.DataFrame:  # fmt: skip
+    """:func:`goal_returns` of each run's final checkpoint at both :data:`GOAL_SETS`, long:
+    columns ``method``, ``seed``, ``run`` (the run directory's name), ``goals`` and those of
+    :func:`goal_returns`. ``runs``: method → run directories in seed order (a figure set's
+    ``runs``); ``seeds`` keeps only those seeds.
+
+    ``data/measurements/reacher5_goal_returns.csv`` holds this table for the checkpoints the
+    record does not keep (it keeps seed 0's), with how it was made.
+    """
+    from pathlib import Path
+
+    from vslbook.experiments.diskill_runs import load_model
+    from vslbook.results import RunDir
+
+    frames = []
+    for method, paths in runs.items():
+        for path in paths:
+            seed = int(RunDir.open(path).config["seed"])
+            if seeds is not None and seed not in seeds:
+                continue
+            model = load_model(path)
+            for goals, contexts in zip(GOAL_SETS, (ring(0.4, 5.0), model.test_contexts),
+                                       strict=True):  # fmt: skip
+                frame = goal_returns(model, contexts)
+                frame.insert(0, "goals", goals)
+                frame.insert(0, "run", Path(path).name)
+                frame.insert(0, "seed", seed)
+                frame.insert(0, "method", method)
+                frames.append(frame)
+    if not frames:
+        raise ValueError(f"no run of seeds {seeds} in runs {sorted(runs)}")
+    return pd.concat(frames, ignore_index=True)
 
 
 def draw_goal_returns(ax: plt.Axes, returns: dict[str, pd.DataFrame]) -> plt.Axes:
