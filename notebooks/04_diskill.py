@@ -1195,7 +1195,8 @@ kept = measurements("reacher5_goal_returns.csv")
 for (method, seed), f in kept[kept["seed"] != 0].groupby(["method", "seed"], sort=False):
     on = dict(tuple(f.groupby("goals")))
     print(f"{DR.LABELS[method]}, seed {seed} (data/measurements/): "
-          f"{RF.ring_summary(on[RF.GOAL_SETS[0]])}\n    {RF.test_goal_summary(on[RF.GOAL_SETS[1]])}")
+          f"{RF.ring_summary(on[RF.GOAL_SETS[0]])}\n"
+          f"    {RF.summary_at_test_goals(on[RF.GOAL_SETS[1]])}")
 
 # %% [markdown]
 # **The test curves taken apart** (not a figure of the thesis). A success curve stays at

@@ -65,10 +65,10 @@ def test_ring_summary():
         R.ring_summary(_frame([0, 90], [-1.0, -1.0]))
 
 
-def test_test_goal_summary():
+def test_summary_at_test_goals():
     f = _frame([-174, 10, 20, 30], [-160.0, -1.0, -2.0, -3.0], radius=[0.39, 0.1, 0.2, 0.3])
-    assert R.test_goal_summary(f) == (
+    assert R.summary_at_test_goals(f) == (
         "mean return -41.50 over its 4 test goals; 1 below −5: -160 at -174° (0.39 m); "
         "without them -2.00"
     )
-    assert R.test_goal_summary(f.iloc[1:]).endswith("0 below −5; without them -2.00")
+    assert R.summary_at_test_goals(f.iloc[1:]).endswith("0 below −5; without them -2.00")

@@ -32,7 +32,7 @@ import torch
 __all__ = [
     "active_experts", "disk_grid", "draw_active_experts", "draw_context_regions",
     "draw_goal_returns", "draw_reaches", "goal_returns", "goal_returns_table",
-    "log_preference", "reaches", "ring", "ring_summary", "test_goal_summary",
+    "log_preference", "reaches", "ring", "ring_summary", "summary_at_test_goals",
 ]  # fmt: skip
 
 RADIUS = 0.5  # 5LR's goals: the disk of radius 0.5 around the first joint (B.4.3)
@@ -221,7 +221,7 @@ def ring_summary(frame: pd.DataFrame) -> str:
             f"{_POOR}: {poor} of {len(frame)}")  # fmt: skip
 
 
-def test_goal_summary(frame: pd.DataFrame) -> str:
+def summary_at_test_goals(frame: pd.DataFrame) -> str:
     """One line on :func:`goal_returns` at a run's test goals: the mean return (for a single
     policy, the test return the run logged last), the goals below :data:`POOR_RETURN` with
     their return, angle and distance, and the mean without them."""
