@@ -616,6 +616,7 @@ for reading, keys in reading_keys.items():
 
 # %% tags=["full-width"]
 from vslbook.experiments import svsl_beer_pong as BP
+from vslbook.experiments.beer_pong_grids import seeds_grid
 from vslbook.experiments.reproduction import reproduction_text
 
 t0 = time.perf_counter()
@@ -625,14 +626,15 @@ bp_runs = bp_set.runs  # method -> run directories
 bp_counts = BP.beer_pong_counts(bp_set.budget)
 print("counts of these runs:", bp_counts)
 # Fig. 3.2e/f: a finished run logged its final grid (100 draws on 13 x 20 cells at full,
-# minutes per model), which is drawn as logged; a probe is drawn from its checkpoint on
-# the reduced grid (BP.drawn_grid)
+# minutes per model); the panels draw the mean of the logged grids over the seeds, as the
+# thesis does over its 20 models (seeds_grid). Where no run logged one (only probes), the
+# first run's grid is drawn from its checkpoint on the reduced grid (BP.drawn_grid)
 print(f"beer pong runs ready in {time.perf_counter() - t0:.0f} s")
 bp_models = {m: BP.load_model(paths[0]) for m, paths in bp_runs.items()}
 
 # %% [markdown]
-# The panels of Fig. 3.2 (beer pong) and Fig. A.1 from these runs, seed 0 where a panel
-# shows one model:
+# The panels of Fig. 3.2 (beer pong) and Fig. A.1 from these runs: seed 0 where a panel
+# shows one model (c, g), the mean over the finished seeds in the success grids (e, f):
 
 # %% tags=["full-width"]
 fig, axes = plt.subplots(3, 2, figsize=(11, 13))
@@ -645,9 +647,9 @@ BP.draw_context_coverage(axes[1, 0], bp_models["SVSL"])
 probe = {m: bp_set.probe_note(paths[0]).replace(", ", "\n") for m, paths in bp_runs.items()}
 axes[1, 0].set_title(f"(c) SVSL context distributions (seed 0){probe['SVSL']}")
 for ax, m in zip(axes[2], ("SVSL", "HiREPS"), strict=True):
-    grid, how = BP.drawn_grid(bp_runs[m][0], bp_set.budget)
-    BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m} (seed 0, "
-                         f"{how}){probe[m]}")
+    grid, how = seeds_grid(bp_runs[m], bp_set.budget)
+    BP.draw_success_grid(ax, grid, title=f"({'e' if m == 'SVSL' else 'f'}) {m}:\n{how}"
+                         f"{probe[m]}")  # fmt: skip
 trajs = BP.ball_trajectories(bp_models["SVSL"], np.array([0.0, -1.7]),
                              n_draws=bp_counts["trajectory_draws"])  # fmt: skip
 BP.draw_ball_trajectories(axes[1, 1], trajs)

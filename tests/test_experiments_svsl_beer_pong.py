@@ -327,6 +327,6 @@ def test_fig_3_2_is_a_registered_figure(smoke_runs, monkeypatch, tmp_path):
     fig = figure_draws.draw_fig_3_2("smoke", root, progress=False)
     titles = [ax.get_title() for ax in fig.axes if ax.get_title()]
     assert any(t.startswith("(a) beer pong") for t in titles)
-    assert any(t.startswith("(e) SVSL: success") for t in titles)
+    assert any(t.startswith("(e) SVSL: mean success") for t in titles)
     assert any("Runs of fig3-2" in t.get_text() for t in fig.texts)
     plt.close(fig)

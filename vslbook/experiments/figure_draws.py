@@ -103,14 +103,17 @@ def draw_fig_3_2(budget: Budget | str | None = None, root: str | Path = "runs",
                  *, progress: bool = True) -> plt.Figure:  # fmt: skip
     """Fig. 3.2 (Section 3.4.2): (a) beer pong's and (b) table tennis's test return against
     executed episodes (IQM and 95 % CI over seeds) for SVSL, HiREPS and LaDiPS, and (e, f)
-    SVSL's and HiREPS's success over the cup box (seed 0; the means of experts drawn from
-    π(o | c)): a finished run's final grid as it logged it, a probe's from its checkpoint
-    on the reduced grid (:func:`vslbook.experiments.svsl_beer_pong.drawn_grid`). The
-    grids' mean (``grid_success``) and the thesis's claims are printed by
+    SVSL's and HiREPS's success over the cup box (the means of experts drawn from
+    π(o | c)): the mean of the finished seeds' final grids as they logged them, as the
+    thesis draws the mean over its 20 models; with only probes, the first probe's grid from
+    its checkpoint on the reduced grid
+    (:func:`vslbook.experiments.beer_pong_grids.seeds_grid`). The grids' mean
+    (``grid_success``) and the thesis's claims are printed by
     :func:`vslbook.experiments.reproduction.reproduction_text`.
     """
     from vslbook.experiments import svsl_beer_pong as BP
     from vslbook.experiments import svsl_table_tennis as TT
+    from vslbook.experiments.beer_pong_grids import seeds_grid
 
     use_style()
     bp = _set("fig3-2", budget, root, progress, envs=(BP.ENV,))
@@ -121,9 +124,8 @@ def draw_fig_3_2(budget: Budget | str | None = None, root: str | Path = "runs",
     TT.draw_learning_curves(axes[1], TT.learning_curves(tt.runs), thesis=None)
     axes[1].set_title(f"(b) table tennis: test return ({tt.budget})")
     for ax, method, panel in zip(axes[2:], ("SVSL", "HiREPS"), "ef", strict=True):
-        cells, how = BP.drawn_grid(bp.runs[method][0], bp.budget)
-        BP.draw_success_grid(ax, cells, title=f"({panel}) {method}: success over the cup box "
-                             f"(seed 0, {how})")  # fmt: skip
+        cells, how = seeds_grid(bp.runs[method], bp.budget)
+        BP.draw_success_grid(ax, cells, title=f"({panel}) {method}:\n{how}")
     fig.suptitle("Fig. 3.2 (ours; thesis: 20 seeds, success 92 % for SVSL and 75 % for HiREPS)",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()
